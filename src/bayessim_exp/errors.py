@@ -1,0 +1,13 @@
+"""Errors a user can act on: a bad config, bad real data, a failed training run."""
+
+
+class ConfigError(ValueError):
+    """A config value, name or key that is not allowed; the message lists what is."""
+
+
+class DataError(ValueError):
+    """Real trajectories that do not fit the task (shapes, sizes, timestep)."""
+
+
+class TrainingError(RuntimeError):
+    """Training diverged (NaN/inf); the message names the round and step."""

@@ -1,0 +1,1 @@
+"""Posterior models q(theta | x) and the mixture algebra around them."""

@@ -1,0 +1,130 @@
+"""What every posterior model offers, and the training loop the mixture-density models share."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable, Protocol
+
+import torch
+
+from ..errors import ConfigError, TrainingError
+from .mixture import GaussianMixture
+
+
+class PosteriorModel(Protocol):
+    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "",
+            on_epoch: Callable[[int, float, float], None] | None = None) -> dict: ...
+
+    def conditional(self, x_obs: torch.Tensor) -> GaussianMixture: ...
+
+    def state_dict(self) -> dict: ...
+
+    def load_state_dict(self, state: dict) -> None: ...
+
+
+@dataclasses.dataclass
+class TrainConfig:
+    """Optimisation settings shared by the mixture-density models."""
+
+    lr: float = 1.0e-3
+    batch_size: int = 256
+    max_epochs: int = 300
+    patience: int = 20  # epochs without validation improvement before stopping
+    val_fraction: float = 0.1
+    weight_decay: float = 0.0
+
+    def validate(self) -> None:
+        if self.lr <= 0 or self.batch_size < 1 or self.max_epochs < 1 or self.patience < 1:
+            raise ConfigError("lr must be > 0; batch_size, max_epochs, patience >= 1")
+        if not 0.0 < self.val_fraction < 0.5:
+            raise ConfigError(f"val_fraction must be in (0, 0.5), got {self.val_fraction}")
+        if self.weight_decay < 0:
+            raise ConfigError("weight_decay must be >= 0")
+
+
+class Standardizer(torch.nn.Module):
+    """Affine map to zero mean and unit variance, fitted once and then kept (fine-tuning)."""
+
+    def __init__(self, dim: int):
+        super().__init__()
+        self.register_buffer("shift", torch.zeros(dim))
+        self.register_buffer("scale", torch.ones(dim))
+
+    def fit(self, data: torch.Tensor) -> None:
+        self.shift.copy_(data.mean(0))
+        self.scale.copy_(data.std(0).clamp_min(1e-8))
+
+    def forward(self, data: torch.Tensor) -> torch.Tensor:
+        return (data - self.shift) / self.scale
+
+
+def train_density(
+    net: torch.nn.Module,
+    nll: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    theta: torch.Tensor,
+    x: torch.Tensor,
+    cfg: TrainConfig,
+    *,
+    seed: int,
+    label: str,
+    on_epoch: Callable[[int, float, float], None] | None = None,
+) -> dict:
+    """Minimise mean nll(theta_batch, x_batch) with Adam and early stopping on a held-out split.
+
+    Restores the parameters of the best validation epoch. Raises TrainingError naming `label`
+    and the step when the loss or a gradient becomes non-finite.
+    """
+    from tqdm.auto import tqdm
+
+    g = torch.Generator().manual_seed(seed)
+    n = theta.shape[0]
+    n_val = max(1, int(round(cfg.val_fraction * n)))
+    if n - n_val < 2:
+        raise TrainingError(f"{label}: {n} simulations are too few to train on")
+    perm = torch.randperm(n, generator=g)
+    val_idx, train_idx = perm[:n_val], perm[n_val:]
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    best, best_state, since_best = math.inf, None, 0
+    history: dict[str, list[float]] = {"train": [], "val": []}
+    step = 0
+    bar = tqdm(range(cfg.max_epochs), desc=f"fit {label}".strip(), leave=False, delay=2, disable=None)
+    for epoch in bar:
+        net.train()
+        order = train_idx[torch.randperm(len(train_idx), generator=g)]
+        total, count = 0.0, 0
+        for start in range(0, len(order), cfg.batch_size):
+            b = order[start : start + cfg.batch_size]
+            loss = nll(theta[b], x[b]).mean()
+            step += 1
+            if not torch.isfinite(loss):
+                raise TrainingError(f"{label}: loss became {loss.item()} at epoch {epoch}, step {step}")
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            if not all(torch.isfinite(p.grad).all() for p in net.parameters() if p.grad is not None):
+                raise TrainingError(f"{label}: non-finite gradient at epoch {epoch}, step {step}")
+            opt.step()
+            total += loss.item() * len(b)
+            count += len(b)
+        net.eval()
+        with torch.no_grad():
+            val = nll(theta[val_idx], x[val_idx]).mean().item()
+        if not math.isfinite(val):
+            raise TrainingError(f"{label}: validation loss became {val} at epoch {epoch}, step {step}")
+        history["train"].append(total / count)
+        history["val"].append(val)
+        if on_epoch is not None:
+            on_epoch(epoch, total / count, val)
+        bar.set_postfix(train=f"{total / count:.3f}", val=f"{val:.3f}")
+        if val < best - 1e-4:
+            best, since_best = val, 0
+            best_state = {k: v.detach().clone() for k, v in net.state_dict().items()}
+        else:
+            since_best += 1
+            if since_best >= cfg.patience:
+                break
+    if best_state is not None:
+        net.load_state_dict(best_state)
+    history["best_val"] = best
+    history["epochs"] = len(history["train"])
+    return history

@@ -1,0 +1,122 @@
+"""MDNN: a mixture density network q(theta | x) with full- or diagonal-covariance components.
+
+Inputs and targets are standardised with statistics of the first training set; components
+are parameterised by the upper Cholesky factor U of their precision (positive diagonal via
+exp), so that log N(theta; mu, (U^T U)^-1) = sum log diag U - |U (theta - mu)|^2 / 2 - D/2 log 2pi.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import torch
+from torch import nn
+
+from ..errors import ConfigError
+from ..registry import register
+from .base import Standardizer, TrainConfig, train_density
+from .mixture import GaussianMixture
+
+_ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
+
+
+@dataclasses.dataclass
+class MdnnConfig(TrainConfig):
+    components: int = 5
+    hidden: list[int] = dataclasses.field(default_factory=lambda: [128, 128])
+    activation: str = "relu"
+    covariance: str = "full"  # full | diagonal
+
+    def validate(self) -> None:
+        super().validate()
+        if self.components < 1:
+            raise ConfigError(f"components must be an integer >= 1, got {self.components}")
+        if not self.hidden or any(h < 1 for h in self.hidden):
+            raise ConfigError(f"hidden must be a non-empty list of positive layer sizes, got {self.hidden}")
+        if self.activation not in _ACTIVATIONS:
+            raise ConfigError(f"activation {self.activation!r} not allowed; allowed: {', '.join(_ACTIVATIONS)}")
+        if self.covariance not in ("full", "diagonal"):
+            raise ConfigError(f"covariance {self.covariance!r} not allowed; allowed: full, diagonal")
+
+
+class MixtureHead(nn.Module):
+    """Features -> (logits [K], means [K, D], precision factors U [K, D, D])."""
+
+    def __init__(self, in_dim: int, dim: int, components: int, full: bool):
+        super().__init__()
+        self.dim, self.k, self.full = dim, components, full
+        self.n_off = dim * (dim - 1) // 2 if full else 0
+        self.out = nn.Linear(in_dim, components * (1 + 2 * dim + self.n_off))
+        self.register_buffer("triu", torch.triu_indices(dim, dim, offset=1), persistent=False)
+
+    def forward(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        k, d = self.k, self.dim
+        out = self.out(h)
+        logits, means, log_diag, off = torch.split(out, [k, k * d, k * d, k * self.n_off], -1)
+        U = torch.diag_embed(torch.exp(log_diag.reshape(-1, k, d).clamp(-12, 12)))
+        if self.full:
+            upper = torch.zeros_like(U)
+            upper[:, :, self.triu[0], self.triu[1]] = off.reshape(-1, k, self.n_off)
+            U = U + upper
+        return logits, means.reshape(-1, k, d), U
+
+
+def mixture_nll(logits: torch.Tensor, means: torch.Tensor, U: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
+    z = (U @ (theta[:, None, :] - means).unsqueeze(-1)).squeeze(-1)
+    log_det = torch.log(torch.diagonal(U, dim1=-2, dim2=-1)).sum(-1)
+    comp = log_det - 0.5 * (z**2).sum(-1) - 0.5 * means.shape[-1] * math.log(2 * math.pi)
+    return -torch.logsumexp(torch.log_softmax(logits, -1) + comp, -1)
+
+
+class MDNN:
+    def __init__(self, cfg: MdnnConfig, theta_dim: int, x_dim: int):
+        self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
+        act = _ACTIVATIONS[cfg.activation]
+        layers, width = [], x_dim
+        for h in cfg.hidden:
+            layers += [nn.Linear(width, h), act()]
+            width = h
+        self.body = nn.Sequential(*layers)
+        self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
+        self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
+        self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm})
+        self.fitted = False
+
+    def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
+        return mixture_nll(*self.head(self.body(x_std)), theta_std)
+
+    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
+        theta, x = theta.float(), x.float()
+        if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
+            torch.manual_seed(seed)
+            self.net.apply(lambda m: m.reset_parameters() if isinstance(m, nn.Linear) else None)
+            self.x_norm.fit(x)
+            self.theta_norm.fit(theta)
+        history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
+                                seed=seed, label=label, on_epoch=on_epoch)
+        self.fitted = True
+        return history
+
+    @torch.no_grad()
+    def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
+        """q(theta | x_obs) in parameter units, for one summary x_obs [F]."""
+        self.net.eval()
+        logits, means, U = self.head(self.body(self.x_norm(x_obs.float().reshape(1, -1))))
+        eye = torch.eye(self.theta_dim, dtype=torch.float64)
+        U_inv = torch.linalg.solve_triangular(U[0].double(), eye.expand_as(U[0]), upper=True)
+        covs = U_inv @ U_inv.transpose(-1, -2)
+        std = GaussianMixture(logits[0], means[0], covs)
+        return std.affine(self.theta_norm.shift, self.theta_norm.scale)
+
+    def state_dict(self) -> dict:
+        return {"net": self.net.state_dict(), "fitted": self.fitted}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.net.load_state_dict(state["net"])
+        self.fitted = state["fitted"]
+
+
+@register("model", "mdnn", MdnnConfig)
+def mdnn(cfg: MdnnConfig, theta_dim: int, x_dim: int) -> MDNN:
+    return MDNN(cfg, theta_dim, x_dim)

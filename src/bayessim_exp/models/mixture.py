@@ -1,0 +1,156 @@
+"""Gaussian mixtures: density, sampling, affine maps, products, and truncation to a box.
+
+The posterior of every mixture-density model is a `GaussianMixture`; conditioning returns it
+truncated to the prior's support (`TruncatedMixture`), renormalised rather than clipped.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+_LOG_2PI = math.log(2 * math.pi)
+
+
+class GaussianMixture:
+    """sum_k w_k N(mean_k, cov_k) over R^D, float64."""
+
+    def __init__(self, logits: torch.Tensor, means: torch.Tensor, covs: torch.Tensor):
+        self.log_weights = torch.log_softmax(logits.double(), -1)
+        self.means = means.double()
+        self.covs = 0.5 * (covs.double() + covs.double().transpose(-1, -2))
+        self.scale_tril = torch.linalg.cholesky(self.covs)
+
+    @property
+    def num_components(self) -> int:
+        return self.means.shape[0]
+
+    @property
+    def dim(self) -> int:
+        return self.means.shape[1]
+
+    def component_log_prob(self, theta: torch.Tensor) -> torch.Tensor:
+        """log N(theta; mean_k, cov_k) for every component: [..., K]."""
+        diff = theta.double()[..., None, :] - self.means  # [..., K, D]
+        z = torch.linalg.solve_triangular(self.scale_tril, diff.unsqueeze(-1), upper=False).squeeze(-1)
+        half_logdet = torch.log(torch.diagonal(self.scale_tril, dim1=-2, dim2=-1)).sum(-1)
+        return -0.5 * (z**2).sum(-1) - half_logdet - 0.5 * self.dim * _LOG_2PI
+
+    def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
+        return torch.logsumexp(self.log_weights + self.component_log_prob(theta), -1)
+
+    def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
+        n = math.prod(shape)
+        comp = torch.multinomial(self.log_weights.exp(), n, replacement=True, generator=generator)
+        eps = torch.randn(n, self.dim, dtype=torch.float64, generator=generator)
+        out = self.means[comp] + (self.scale_tril[comp] @ eps.unsqueeze(-1)).squeeze(-1)
+        return out.reshape(*shape, self.dim)
+
+    @property
+    def mean(self) -> torch.Tensor:
+        return (self.log_weights.exp()[:, None] * self.means).sum(0)
+
+    @property
+    def covariance(self) -> torch.Tensor:
+        w = self.log_weights.exp()
+        mu = self.mean
+        d = self.means - mu
+        return (w[:, None, None] * (self.covs + d[:, :, None] * d[:, None, :])).sum(0)
+
+    def affine(self, shift: torch.Tensor, scale: torch.Tensor) -> "GaussianMixture":
+        """The mixture of shift + scale * theta (scale a vector: a diagonal map)."""
+        s = scale.double()
+        return GaussianMixture(self.log_weights, self.means * s + shift.double(), self.covs * s[:, None] * s[None, :])
+
+    def product(self, other: "GaussianMixture") -> "GaussianMixture":
+        """The normalised product density p(theta) * q(theta) / Z, a mixture of K1*K2 Gaussians.
+
+        N(a, A) N(b, B) = N(a; b, A + B) * N(c, C) with C = (A^-1 + B^-1)^-1, c = C (A^-1 a + B^-1 b).
+        """
+        a, b = self.means[:, None], other.means[None, :]  # [K1, 1, D], [1, K2, D]
+        A, B = self.covs[:, None], other.covs[None, :]
+        S = A + B
+        L = torch.linalg.cholesky(S)
+        diff = (a - b).unsqueeze(-1)
+        z = torch.linalg.solve_triangular(L, diff, upper=False).squeeze(-1)
+        log_norm = -0.5 * (z**2).sum(-1) - torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1) - 0.5 * self.dim * _LOG_2PI
+        # C = A S^-1 B and c = B S^-1 a + A S^-1 b, symmetric and stable without inverting A or B
+        C = A @ torch.cholesky_solve(B, L)
+        c = (B @ torch.cholesky_solve(a.unsqueeze(-1), L) + A @ torch.cholesky_solve(b.unsqueeze(-1), L)).squeeze(-1)
+        logits = self.log_weights[:, None] + other.log_weights[None, :] + log_norm
+        d = self.dim
+        return GaussianMixture(logits.reshape(-1), c.reshape(-1, d), C.reshape(-1, d, d))
+
+    def prune(self, max_components: int) -> "GaussianMixture":
+        """Keep the heaviest components (renormalised)."""
+        if self.num_components <= max_components:
+            return self
+        keep = torch.topk(self.log_weights, max_components).indices
+        return GaussianMixture(self.log_weights[keep], self.means[keep], self.covs[keep])
+
+    def state_dict(self) -> dict:
+        return {"log_weights": self.log_weights, "means": self.means, "covs": self.covs}
+
+    @classmethod
+    def from_state_dict(cls, state: dict) -> "GaussianMixture":
+        return cls(state["log_weights"], state["means"], state["covs"])
+
+
+class TruncatedMixture:
+    """A mixture restricted to the box [low, high] and renormalised.
+
+    The normaliser P(box) is estimated once by Monte Carlo with `num_mc` samples (relative error
+    about sqrt((1 - P) / (P num_mc))); sampling is exact, by rejection.
+    """
+
+    def __init__(self, mixture: GaussianMixture, low: torch.Tensor, high: torch.Tensor,
+                 num_mc: int = 200_000, seed: int = 0):
+        self.mixture = mixture
+        self.low, self.high = low.double(), high.double()
+        g = torch.Generator().manual_seed(seed)
+        inside = self._inside(mixture.sample((num_mc,), generator=g)).double().mean()
+        if inside <= 0:
+            raise ValueError(
+                "the posterior puts no measurable mass inside the prior's support; "
+                "the real data may not match the simulator or the model is badly fitted"
+            )
+        self.mass_inside = float(inside)
+        self._log_mass = math.log(self.mass_inside)
+        self._generator = torch.Generator().manual_seed(seed + 1)
+
+    def _inside(self, theta: torch.Tensor) -> torch.Tensor:
+        return ((theta >= self.low) & (theta <= self.high)).all(-1)
+
+    @property
+    def dim(self) -> int:
+        return self.mixture.dim
+
+    def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
+        theta = theta.double()
+        lp = self.mixture.log_prob(theta) - self._log_mass
+        return torch.where(self._inside(theta), lp, torch.tensor(-torch.inf, dtype=lp.dtype))
+
+    def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
+        g = generator or self._generator
+        n = math.prod(shape)
+        got, have = [], 0
+        batch = max(64, int(1.2 * n / self.mass_inside))
+        while have < n:
+            draw = self.mixture.sample((batch,), generator=g)
+            draw = draw[self._inside(draw)]
+            got.append(draw)
+            have += len(draw)
+        return torch.cat(got)[:n].reshape(*shape, self.dim)
+
+    def moments(self, num: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
+        """Monte Carlo mean and standard deviation (fixed seed, so repeatable)."""
+        s = self.sample((num,), generator=torch.Generator().manual_seed(12345))
+        return s.mean(0), s.std(0)
+
+    def state_dict(self) -> dict:
+        return {"mixture": self.mixture.state_dict(), "low": self.low, "high": self.high}
+
+    @classmethod
+    def from_state_dict(cls, state: dict) -> "TruncatedMixture":
+        return cls(GaussianMixture.from_state_dict(state["mixture"]), state["low"], state["high"])

@@ -1,0 +1,30 @@
+"""Collect policies: batched `act(obs [N, S], t) -> actions [N, A]` in [-1, 1]."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from .registry import register
+
+
+@dataclasses.dataclass
+class RandomPolicyConfig:
+    pass
+
+
+class RandomPolicy:
+    """Independent uniform actions over the normalised bounds at every step."""
+
+    def __init__(self, action_dim: int, seed: int):
+        self.action_dim = action_dim
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        return torch.rand(obs.shape[0], self.action_dim, generator=self.generator) * 2 - 1
+
+
+@register("policy", "random", RandomPolicyConfig)
+def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int) -> RandomPolicy:
+    return RandomPolicy(action_dim, seed)

@@ -1,0 +1,1 @@
+"""RL in the loop (torchrl PPO); `none` runs BayesSim rounds without a policy to train."""

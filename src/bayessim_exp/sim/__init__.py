@@ -1,0 +1,1 @@
+"""Batched MuJoCo simulation with per-environment parameters."""

@@ -1,0 +1,1 @@
+"""Summarizers: Trajectories -> Tensor[N, F], batched torch on the data's device."""

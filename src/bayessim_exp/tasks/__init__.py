@@ -1,0 +1,1 @@
+"""Tasks: a MuJoCo model with observations, actions, reward, reset and parameters to infer."""

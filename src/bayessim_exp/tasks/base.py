@@ -1,0 +1,106 @@
+"""Task: what a robot learning problem is, independent of the simulation backend.
+
+A task owns its MJCF, the observation/action/reward/termination functions (array code written
+against an array namespace `xp`, numpy on CPU), the reset distribution, control rate, episode
+length, its default ParamSpec and the surrogate-real parameter values.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from ..errors import ConfigError
+from ..sim.params import ParamConfig, ParamSpec
+
+ASSETS = Path(__file__).parent / "assets"
+
+
+@dataclasses.dataclass
+class TaskConfig:
+    """Fields every task config has; tasks subclass it to add their own."""
+
+    parameters: dict[str, ParamConfig] = dataclasses.field(default_factory=dict)
+    real_params: dict[str, float] = dataclasses.field(default_factory=dict)
+    control_dt: float = 0.05
+    episode_length: int = 200
+
+    def validate(self) -> None:
+        if not self.parameters:
+            raise ConfigError("parameters is empty: declare at least one parameter to infer")
+        missing = [n for n in self.parameters if n not in self.real_params]
+        extra = [n for n in self.real_params if n not in self.parameters]
+        if missing or extra:
+            raise ConfigError(
+                f"real_params must give a value for every parameter; missing {missing}, unknown {extra}; "
+                f"parameters: {', '.join(self.parameters)}"
+            )
+        for name, value in self.real_params.items():
+            low, high = self.parameters[name].range
+            if not low <= value <= high:
+                raise ConfigError(f"real_params.{name}={value} lies outside its range [{low}, {high}]")
+        if self.control_dt <= 0 or self.episode_length < 1:
+            raise ConfigError("control_dt must be > 0 and episode_length >= 1")
+
+
+class Task:
+    """Base class. Subclasses set `name`, `xml`, `obs_names`, `data_fields` and the hooks."""
+
+    name: str = ""
+    xml: str = ""  # file name under tasks/assets
+    obs_names: tuple[str, ...] = ()
+    # MjData fields observe() reads; state fields (qpos, qvel, ...) are always current,
+    # derived ones (xpos, sensordata, ...) make the simulator compute positions and velocities
+    data_fields: tuple[str, ...] = ("qpos", "qvel")
+
+    def __init__(self, cfg: TaskConfig):
+        self.cfg = cfg
+        self.spec = ParamSpec.from_config(cfg.parameters, self.model)
+        steps = cfg.control_dt / self.model.opt.timestep
+        self.frame_skip = int(round(steps))
+        if self.frame_skip < 1 or abs(steps - self.frame_skip) > 1e-6:
+            raise ConfigError(
+                f"control_dt={cfg.control_dt} is not a whole multiple of the model timestep {self.model.opt.timestep}"
+            )
+        lo, hi = self.model.actuator_ctrlrange.T
+        self._ctrl_mid, self._ctrl_half = (hi + lo) / 2, (hi - lo) / 2
+
+    @functools.cached_property
+    def model(self) -> mujoco.MjModel:
+        return mujoco.MjModel.from_xml_path(str(ASSETS / self.xml))
+
+    @property
+    def obs_dim(self) -> int:
+        return len(self.obs_names)
+
+    @property
+    def action_dim(self) -> int:
+        return self.model.nu
+
+    @property
+    def real_values(self) -> np.ndarray:
+        return np.array([self.cfg.real_params[n] for n in self.spec.names])
+
+    def ctrl(self, action: np.ndarray) -> np.ndarray:
+        """Normalised actions in [-1, 1] -> actuator controls in the ctrlrange."""
+        return self._ctrl_mid + self._ctrl_half * np.clip(action, -1.0, 1.0)
+
+    # hooks, batched over environments ------------------------------------------------
+    def reset_state(self, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Initial (qpos [n, nq], qvel [n, nv])."""
+        m = self.model
+        return np.repeat(m.qpos0[None], n, 0), np.zeros((n, m.nv))
+
+    def observe(self, d: Any, xp: Any = np) -> Any:
+        raise NotImplementedError
+
+    def reward(self, obs: Any, action: Any, xp: Any = np) -> Any:
+        raise NotImplementedError
+
+    def terminated(self, obs: Any, xp: Any = np) -> Any:
+        return xp.zeros(obs.shape[0], dtype=bool)

@@ -64,9 +64,8 @@ class NativeSimulator:
         ids = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids)
         self.set_params(params, ids)
         self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
-        qpos, qvel = self.task.reset_state(rng, len(ids))
-        self.batch.qpos[ids] = qpos
-        self.batch.qvel[ids] = qvel
+        for field, values in self.task.reset_state(rng, len(ids)).items():
+            self.batch.bind(field)[ids] = values
         self.batch.forward(ids, stage=mujoco.mjtStage.mjSTAGE_VEL)
         self._diverged[ids] = False
         return self.observe()[ids]
@@ -114,7 +113,7 @@ class NativeSimulator:
             alive &= ~diverged
             valid[:, t] = alive
             actions[alive, t] = act[alive]
-            rewards[alive, t] = task.reward(obs[alive], act[alive])
+            rewards[alive, t] = task.reward(obs[alive], act[alive], next_obs[alive])
             # a terminated or diverged slot holds its last valid state
             states[:, t + 1] = np.where(alive[:, None], next_obs, states[:, t])
             alive &= ~np.asarray(task.terminated(next_obs), dtype=bool)

@@ -91,16 +91,19 @@ class Task:
         return self._ctrl_mid + self._ctrl_half * np.clip(action, -1.0, 1.0)
 
     # hooks, batched over environments ------------------------------------------------
-    def reset_state(self, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Initial (qpos [n, nq], qvel [n, nv])."""
-        m = self.model
-        return np.repeat(m.qpos0[None], n, 0), np.zeros((n, m.nv))
+    def reset_state(self, rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
+        """Initial values [n, ...] of MjData state fields (qpos, qvel, mocap_pos, mocap_quat, ...).
+
+        Fields left out keep the model's defaults (qpos0, zero velocities)."""
+        return {"qpos": np.repeat(self.model.qpos0[None], n, 0), "qvel": np.zeros((n, self.model.nv))}
 
     def observe(self, d: Any, xp: Any = np) -> Any:
         raise NotImplementedError
 
-    def reward(self, obs: Any, action: Any, xp: Any = np) -> Any:
+    def reward(self, obs: Any, action: Any, next_obs: Any, xp: Any = np) -> Any:
+        """Reward of taking `action` in `obs` and landing in `next_obs`: [N]."""
         raise NotImplementedError
 
     def terminated(self, obs: Any, xp: Any = np) -> Any:
+        """True where the episode ends in `obs`: [N]."""
         return xp.zeros(obs.shape[0], dtype=bool)

@@ -27,6 +27,7 @@ GROUPS = ("task", "prior", "policy", "summarizer", "model", "rl", "sim", "real")
 _BUILTIN_MODULES = (
     "bayessim_exp.tasks.pendulum",
     "bayessim_exp.tasks.cartpole",
+    "bayessim_exp.tasks.ant",
     "bayessim_exp.priors",
     "bayessim_exp.policies",
     "bayessim_exp.summarizers.basic",

@@ -29,6 +29,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.tasks.cartpole",
     "bayessim_exp.tasks.ant",
     "bayessim_exp.tasks.humanoid",
+    "bayessim_exp.tasks.ball_balance",
     "bayessim_exp.priors",
     "bayessim_exp.policies",
     "bayessim_exp.summarizers.basic",

@@ -30,6 +30,8 @@ _BUILTIN_MODULES = (
     "bayessim_exp.tasks.ant",
     "bayessim_exp.tasks.humanoid",
     "bayessim_exp.tasks.ball_balance",
+    "bayessim_exp.tasks.ingenuity",
+    "bayessim_exp.tasks.quadcopter",
     "bayessim_exp.priors",
     "bayessim_exp.policies",
     "bayessim_exp.summarizers.basic",

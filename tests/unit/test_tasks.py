@@ -72,7 +72,7 @@ def test_every_parameter_changes_the_trajectory(name):
 def test_wrong_target_names_the_closest_valid_body(name):
     cfg = task_cfg(name)
     model = make_task(cfg).model
-    body = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, 1)
+    body = next(n for i in range(1, model.nbody) if (n := mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, i)))
     typo = body + "x"
     first = next(iter(cfg["parameters"].values()))
     first["targets"] = [f"body_mass[{typo}]"] + list(first["targets"])

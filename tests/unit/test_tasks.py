@@ -62,6 +62,7 @@ def test_every_parameter_changes_the_trajectory(name):
     traj = sim.rollout(params, Replay(fixed_actions(HORIZON, task.action_dim)), HORIZON, np.random.default_rng(0))
 
     assert not traj.diverged.any(), f"diverged at {[spec.names[(i - 1) // 2] for i in np.flatnonzero(traj.diverged)]}"
+    assert torch.isfinite(traj.rewards).all() and torch.isfinite(traj.states).all()
     states = traj.states.numpy()
     change = np.abs(states[2::2] - states[1::2]).max(axis=(1, 2))
     dead = {n: float(c) for n, c in zip(spec.names, change) if not c > MIN_CHANGE}

@@ -36,7 +36,7 @@ class LocomotionConfig(TaskConfig):
 
 
 class Locomotion(Task):
-    """Subclasses set name, xml and obs_names' joint part through `joint_obs_names`."""
+    """Subclasses set name and xml: an MJCF with a free root joint, then hinges, each with a motor."""
 
     data_fields = ("qpos", "qvel", "ctrl")
 
@@ -55,11 +55,11 @@ class Locomotion(Task):
     @property
     def obs_names(self) -> tuple[str, ...]:
         joints = [mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(1, self.model.njnt)]
-        actuators = [mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) or f"a{a}" for a in range(self.model.nu)]
         return (
             "height", "vel_x", "vel_y", "vel_z", "angvel_x", "angvel_y", "angvel_z", "yaw", "roll",
             "angle_to_target", "up_proj", "heading_proj",
-            *(f"pos_{j}" for j in joints), *(f"vel_{j}" for j in joints), *(f"action_{a}" for a in actuators),
+            *(f"pos_{j}" for j in joints), *(f"vel_{j}" for j in joints),
+            *(f"action_{joints[k]}" for k in self._motor_joint),  # actions in actuator order
         )
 
     def reset_state(self, rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:

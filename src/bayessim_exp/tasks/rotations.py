@@ -21,12 +21,6 @@ def matrix(q: Any, xp: Any = np) -> Any:
     return xp.stack([xp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
-def rotate_inverse(q: Any, v: Any, xp: Any = np) -> Any:
-    """World vectors v expressed in the body frame of q."""
-    r = matrix(q, xp)
-    return xp.sum(r * v[:, :, None], axis=1)
-
-
 def roll_yaw(q: Any, xp: Any = np) -> tuple[Any, Any]:
     """Roll (about x) and yaw (about z) of the x-y-z Euler decomposition, in (-pi, pi]."""
     w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]

@@ -32,7 +32,7 @@ STAGES = ("collect", "summarize", "fit", "real", "condition")
 
 @dataclasses.dataclass
 class CollectConfig:
-    trajectories: int = 4000
+    trajectories: int = 10000
     horizon: int = 50
     chunk: int = 4096
     keep_trajectories: bool = False  # keep raw simulated trajectories after summarizing

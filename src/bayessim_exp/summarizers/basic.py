@@ -21,6 +21,11 @@ class StepsConfig:
             raise ConfigError(f"steps must be >= 1, got {self.steps}")
 
 
+def evenly_spaced_times(horizon: int, count: int) -> torch.Tensor:
+    """`count` state indices spread over 0..horizon inclusive, first and last included."""
+    return torch.linspace(0, horizon, count).round().long()
+
+
 class IndexSummarizer:
     """States (and actions) at chosen time indices, flattened; indices depend on the horizon."""
 
@@ -57,5 +62,5 @@ class StartSummarizer(IndexSummarizer):
 @register("summarizer", "waypoints", StepsConfig)
 class WaypointsSummarizer(IndexSummarizer):
     def indices(self, horizon: int) -> torch.Tensor:
-        # K times spread over 0..horizon inclusive; actions at the last time clamp to T-1
-        return torch.linspace(0, horizon, self.cfg.steps).round().long()
+        # actions at the last time clamp to T-1
+        return evenly_spaced_times(horizon, self.cfg.steps)

@@ -9,6 +9,7 @@ import torch
 from ..errors import ConfigError
 from ..registry import register
 from ..sim.trajectories import Trajectories
+from .masking import held_states
 
 
 @dataclasses.dataclass
@@ -45,8 +46,7 @@ class IndexSummarizer:
     def __call__(self, traj: Trajectories) -> torch.Tensor:
         self.check(traj.horizon)
         idx = self.indices(traj.horizon).to(traj.states.device)
-        # terminated episodes already hold their last valid state in `states`
-        parts = [traj.states[:, idx].flatten(1)]
+        parts = [held_states(traj)[:, idx].flatten(1)]
         if self.cfg.include_actions:
             acts = traj.actions[:, idx.clamp(max=traj.horizon - 1)] * traj.valid[:, idx.clamp(max=traj.horizon - 1), None]
             parts.append(acts.flatten(1))

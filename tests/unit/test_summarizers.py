@@ -118,6 +118,13 @@ def test_a_terminated_trajectory_summarises_like_its_valid_part(name, params):
     assert torch.allclose(ended, summarizer(traj.truncate(7)), atol=1e-5)
 
 
+def test_signatory_time_stops_when_the_episode_ends():
+    steps = [12, 7, 0]
+    out = build("signatory", depth=2)(terminated(random_traj(n=3, horizon=12), steps))
+    # the first level-1 term is the time channel's total increment
+    assert torch.allclose(out[:, 0], torch.tensor(steps) / 12.0)
+
+
 @pytest.mark.parametrize("name,params", ALL)
 def test_summaries_are_finite_with_constant_channels_and_very_short_episodes(name, params):
     traj = random_traj(n=4, dtype=torch.float64)

@@ -29,12 +29,28 @@ def exp_increment(delta: torch.Tensor, depth: int) -> list[torch.Tensor]:
     return levels
 
 
+def chen_step(sig: list[torch.Tensor], delta: torch.Tensor) -> list[torch.Tensor]:
+    """sig ⊗ exp(delta): the signature extended by one straight segment with increment delta [N, d].
+
+    Level k is sum_i sig_i ⊗ delta^{⊗(k-i)} / (k-i)!, evaluated Horner-style,
+    (((delta/k + sig_1) ⊗ delta/(k-1) + sig_2) ⊗ delta/(k-2) + ...) ⊗ delta + sig_k,
+    so that each product is with the vector delta rather than between two tensors.
+    """
+    out = [sig[0]]
+    for k in range(1, len(sig)):
+        acc = delta / k
+        for i in range(1, k):
+            acc = outer(acc + sig[i], delta) / (k - i)
+        out.append(sig[k] + acc)
+    return out
+
+
 def signature(path: torch.Tensor, depth: int) -> list[torch.Tensor]:
     """Truncated signature of the piecewise-linear path [N, L, d], by Chen's identity over its segments."""
     increments = path[:, 1:] - path[:, :-1]
-    sig = exp_increment(torch.zeros_like(path[:, 0]), depth)  # the identity: a path with no segment
-    for t in range(increments.shape[1]):
-        sig = multiply(sig, exp_increment(increments[:, t], depth))
+    sig = exp_increment(increments[:, 0], depth)
+    for t in range(1, increments.shape[1]):
+        sig = chen_step(sig, increments[:, t])
     return sig
 
 

@@ -242,26 +242,21 @@ def test_signatory_gradcheck_float64(log_signature):
 # --- learned -------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("architecture", ["conv", "mlp"])
-def test_learned_embedding_trains_by_backprop(architecture):
-    traj = random_traj(n=64, horizon=12, s=3, a=2, seed=5)
-    theta = traj.states[:, -1, :1]  # something the trajectory determines
+def test_learned_embedding_trains_jointly_with_the_mdnn(architecture):
+    traj = random_traj(n=200, horizon=12, s=3, a=2, seed=5)
+    theta = traj.states[:, -1, :2]  # something the trajectory determines
     summarizer = build("learned", time_points=6, architecture=architecture, embedding_dim=4)
     x = summarizer(traj)
-    assert x.shape == (64, summarizer.output_dim(3, 2, 12))
-    head = torch.nn.Linear(summarizer.embedding_dim, 1)
-    params = list(summarizer.embedding.parameters()) + list(head.parameters())
-    opt = torch.optim.Adam(params, lr=1e-2)  # built after output_dim, as the pipeline does
+    assert x.shape == (200, summarizer.output_dim(3, 2, 12))
+    model = registry.build("model", {"name": "mdnn", "components": 2, "hidden": [16], "max_epochs": 3},
+                           theta_dim=2, x_dim=x.shape[1], embedding=summarizer.embedding)
+    model.fit(theta, x, seed=0)  # the first fit re-initialises every layer, so compare from here
     before = [p.detach().clone() for p in summarizer.embedding.parameters()]
-    losses = []
-    for _ in range(30):
-        loss = ((head(summarizer.embedding(x)) - theta) ** 2).mean()
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        losses.append(loss.item())
+    model.fit(theta, x, seed=1)  # fine-tuning: only backpropagation moves the weights now
     after = list(summarizer.embedding.parameters())
+    assert len(after) == len(before) > 0
     assert all(not torch.equal(b, a) for b, a in zip(before, after))
-    assert losses[-1] < losses[0]
+    assert model.conditional(x[0]).dim == 2
 
 
 # --- configuration errors, before any simulation ------------------------------------------

@@ -282,3 +282,11 @@ def test_output_dims_are_explicit():
     assert build("signatory", depth=3).output_dim(3, 2, 50) == 258
     assert build("signatory", depth=3, lead_lag=True, log_signature=True).output_dim(3, 2, 50) == \
         pysiglib.log_sig_length(11, 3)
+
+
+@pytest.mark.parametrize("name", ["start", "waypoints", "corr", "corrdiff", "signatory", "learned"])
+def test_every_shipped_yaml_builds_and_matches_its_output_dim(compose, pendulum, name):
+    summarizer = registry.build("summarizer", compose([f"summarizer={name}"]).summarizer)
+    summarizer.check(50)
+    traj = random_traj(n=3, horizon=50, s=pendulum.obs_dim, a=pendulum.action_dim)
+    assert summarizer(traj).shape == (3, summarizer.output_dim(pendulum.obs_dim, pendulum.action_dim, 50))

@@ -9,6 +9,7 @@ import torch
 from ..errors import ConfigError
 from ..registry import register
 from ..sim.trajectories import Trajectories
+from .masking import held_states
 
 
 @dataclasses.dataclass
@@ -19,6 +20,11 @@ class StepsConfig:
     def validate(self) -> None:
         if self.steps < 1:
             raise ConfigError(f"steps must be >= 1, got {self.steps}")
+
+
+def evenly_spaced_times(horizon: int, count: int) -> torch.Tensor:
+    """`count` state indices spread over 0..horizon inclusive, first and last included."""
+    return torch.linspace(0, horizon, count).round().long()
 
 
 class IndexSummarizer:
@@ -40,8 +46,7 @@ class IndexSummarizer:
     def __call__(self, traj: Trajectories) -> torch.Tensor:
         self.check(traj.horizon)
         idx = self.indices(traj.horizon).to(traj.states.device)
-        # terminated episodes already hold their last valid state in `states`
-        parts = [traj.states[:, idx].flatten(1)]
+        parts = [held_states(traj)[:, idx].flatten(1)]
         if self.cfg.include_actions:
             acts = traj.actions[:, idx.clamp(max=traj.horizon - 1)] * traj.valid[:, idx.clamp(max=traj.horizon - 1), None]
             parts.append(acts.flatten(1))
@@ -57,5 +62,5 @@ class StartSummarizer(IndexSummarizer):
 @register("summarizer", "waypoints", StepsConfig)
 class WaypointsSummarizer(IndexSummarizer):
     def indices(self, horizon: int) -> torch.Tensor:
-        # K times spread over 0..horizon inclusive; actions at the last time clamp to T-1
-        return torch.linspace(0, horizon, self.cfg.steps).round().long()
+        # actions at the last time clamp to T-1
+        return evenly_spaced_times(horizon, self.cfg.steps)

@@ -30,6 +30,8 @@ _BUILTIN_MODULES = (
     "bayessim_exp.policies",
     "bayessim_exp.summarizers.basic",
     "bayessim_exp.models.mdnn",
+    "bayessim_exp.models.mdrff",
+    "bayessim_exp.models.flow",
     "bayessim_exp.real",
     "bayessim_exp.sim.native",
     "bayessim_exp.rl.none",

@@ -28,6 +28,7 @@ import torch
 from ..priors import BoxUniform, GaussianPrior
 from .importance import DefensiveMixture, ImportancePosterior
 from .mixture import GaussianMixture, TruncatedMixture
+from .proposals import TruncatedPrior
 from .restricted import Restricted
 
 log = logging.getLogger(__name__)
@@ -53,6 +54,11 @@ def _gaussian_factor(dist) -> tuple[torch.Tensor, torch.Tensor] | None | str:
 def _box(dist) -> tuple[torch.Tensor, torch.Tensor] | None:
     low, high = getattr(dist, "low", None), getattr(dist, "high", None)
     return None if low is None or high is None else (torch.as_tensor(low).double(), torch.as_tensor(high).double())
+
+
+def _needs_no_correction(proposal, prior) -> bool:
+    """The prior itself, or the prior truncated to a high-density region (constant ratio there)."""
+    return proposal is None or proposal is prior or (isinstance(proposal, TruncatedPrior) and proposal.prior is prior)
 
 
 def _check_covers(prior, proposal) -> None:
@@ -110,8 +116,8 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     conditionals: one q(theta | x_i) per real summary, GaussianMixtures (closed form) or any
         distribution with sample/log_prob (flows).
     prior: the prior p; its box (`low`/`high`), when it has one, is the posterior's support.
-    proposal: p~, the distribution the training simulations were drawn from; None or the prior
-        itself means no correction; a list gives one proposal per conditional.
+    proposal: p~, the distribution the training simulations were drawn from; None, the prior itself
+        or a TruncatedPrior of it mean no correction; a list gives one proposal per conditional.
     Returns a distribution with sample(shape) and log_prob(theta).
     """
     n = len(conditionals)
@@ -120,7 +126,7 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     proposals = list(proposal) if isinstance(proposal, (list, tuple)) else [proposal] * n
     if len(proposals) != n:
         raise ValueError(f"{len(proposals)} proposals for {n} real summaries")
-    corrected = [p for p in proposals if p is not None and p is not prior]
+    corrected = [p for p in proposals if not _needs_no_correction(p, prior)]
     for p in corrected:
         _check_covers(prior, p)
     prior_power = 1 - (n - len(corrected))  # p * prod over uncorrected factors of 1/p

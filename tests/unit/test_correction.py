@@ -85,3 +85,44 @@ def test_non_positive_definite_correction_falls_back_to_importance_sampling(capl
     assert abs(torch.trapezoid(post.log_prob(grid).exp(), grid[:, 0]).item() - 1.0) < 0.02
     assert abs(post.sample((20000,)).mean().item() - exact_mean.item()) < 0.02
     assert math.isclose(post.moments()[0].item(), exact_mean.item(), abs_tol=0.01)
+
+
+def test_moment_matched_proposal_keeps_the_correction_in_closed_form():
+    from bayessim_exp.models.proposals import moment_matched
+
+    low, high = torch.tensor([-3.0, -3.0], dtype=torch.float64), torch.tensor([3.0, 3.0], dtype=torch.float64)
+    box = BoxUniform(low, high)
+    previous = TruncatedMixture(GaussianMixture(torch.zeros(2), torch.tensor([[0.0, 0.0], [1.0, 0.5]]),
+                                                torch.eye(2).expand(2, 2, 2) * 0.3), low, high)
+    proposal = moment_matched(previous)
+    assert isinstance(proposal, TruncatedMixture) and proposal.mixture.num_components == 1
+    torch.testing.assert_close(proposal.mixture.mean, previous.moments()[0], atol=0.03, rtol=0)
+    q = _single(torch.tensor([0.4, 0.2]), 0.05 * torch.eye(2))
+    post = posterior([q], box, proposal)
+    assert isinstance(post, TruncatedMixture)
+    grid_mean = _box_grid_mean(lambda t: q.log_prob(t) - proposal.log_prob(t), low, high)
+    torch.testing.assert_close(post.mixture.mean, grid_mean, atol=1e-3, rtol=0)
+
+
+def test_truncated_prior_proposal_needs_no_correction():
+    from bayessim_exp.models.proposals import TruncatedPrior
+    from bayessim_exp.models.restricted import Restricted
+
+    low, high = torch.tensor([-3.0, -3.0], dtype=torch.float64), torch.tensor([3.0, 3.0], dtype=torch.float64)
+    box = BoxUniform(low, high)
+    previous = TruncatedMixture(_single(torch.tensor([0.5, 0.0]), 0.2 * torch.eye(2)), low, high)
+    proposal = TruncatedPrior(box, previous)
+    draws = proposal.sample((2000,))
+    assert (previous.log_prob(draws) >= proposal.threshold).all()
+    q = _single(torch.tensor([0.4, 0.2]), 0.05 * torch.eye(2))
+    assert isinstance(posterior([q], box, proposal), TruncatedMixture)  # q itself, only truncated
+    flow_like = torch.distributions.MultivariateNormal(torch.tensor([0.4, 0.2]), 0.05 * torch.eye(2))
+    assert isinstance(posterior([flow_like], box, proposal), Restricted)
+
+
+def _box_grid_mean(log_density, low, high, n=401):
+    g0 = torch.linspace(low[0], high[0], n, dtype=torch.float64)
+    g1 = torch.linspace(low[1], high[1], n, dtype=torch.float64)
+    grid = torch.stack(torch.meshgrid(g0, g1, indexing="ij"), -1).reshape(-1, 2)
+    w = torch.softmax(log_density(grid), 0)
+    return (w[:, None] * grid).sum(0)

@@ -1,7 +1,7 @@
-"""Truncated proposals (TSNPE, Deistler et al. 2022): the prior restricted to a previous posterior's
-highest-density region.
+"""Next-round proposals built from a posterior.
 
-On that region prior / proposal is constant, so a model trained on its draws needs no proposal
+Truncated proposals (TSNPE, Deistler et al. 2022): the prior restricted to a previous posterior's
+highest-density region. On that region prior / proposal is constant, so a model trained on its draws needs no proposal
 correction: q(theta | x) restricted to the prior's support is the posterior, provided the region
 holds (nearly) all of the posterior's mass, which `hpd_mass` sets.
 """
@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 
 import torch
+
+from .mixture import GaussianMixture, TruncatedMixture
 
 
 class TruncatedPrior:
@@ -48,3 +50,18 @@ class TruncatedPrior:
             got.append(draw)
             have += len(draw)
         return torch.cat(got)[:n].reshape(*shape, -1)
+
+
+def moment_matched(posterior, num: int = 20_000, seed: int = 0):
+    """A single Gaussian with the posterior's mean and covariance, truncated to its box if it has one.
+
+    As the next round's proposal it keeps the SNPE-A correction of mixture models in closed form.
+    """
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        draws = posterior.sample((num,)).double()
+    cov = torch.cov(draws.T).reshape(draws.shape[1], draws.shape[1])
+    cov = cov + 1e-9 * cov.diagonal().mean() * torch.eye(cov.shape[0], dtype=cov.dtype)
+    gaussian = GaussianMixture(torch.zeros(1), draws.mean(0, keepdim=True), cov[None])
+    low, high = getattr(posterior, "low", None), getattr(posterior, "high", None)
+    return gaussian if low is None else TruncatedMixture(gaussian, low, high, seed=seed)

@@ -41,7 +41,7 @@ _MOMENT_DRAWS = 4000
 
 def _gaussian_factor(dist) -> tuple[torch.Tensor, torch.Tensor] | None | str:
     """(mean, cov) if dist is Gaussian on its support, None if constant there, "other" if neither."""
-    if isinstance(dist, BoxUniform):
+    if dist is None or isinstance(dist, BoxUniform):  # None: an improper flat prior
         return None
     if isinstance(dist, GaussianPrior):
         return dist.loc, dist.covariance_matrix
@@ -115,7 +115,8 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
 
     conditionals: one q(theta | x_i) per real summary, GaussianMixtures (closed form) or any
         distribution with sample/log_prob (flows).
-    prior: the prior p; its box (`low`/`high`), when it has one, is the posterior's support.
+    prior: the prior p; its box (`low`/`high`), when it has one, is the posterior's support; None is
+        an improper flat prior.
     proposal: p~, the distribution the training simulations were drawn from; None, the prior itself
         or a TruncatedPrior of it mean no correction; a list gives one proposal per conditional.
     Returns a distribution with sample(shape) and log_prob(theta).
@@ -134,7 +135,7 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
 
     def log_target(theta: torch.Tensor) -> torch.Tensor:
         theta = theta.double()
-        lp = prior.log_prob(theta).double()
+        lp = torch.zeros(theta.shape[:-1], dtype=torch.float64) if prior is None else prior.log_prob(theta).double()
         out = sum(q.log_prob(theta).double() for q in conditionals) + (prior_power * lp if prior_power else 0.0)
         for p in corrected:
             out = out - p.log_prob(theta).double()

@@ -62,22 +62,29 @@ class FlowConditional:
 
 
 class Flow:
+    """`embedding` (optional, as for MDNN): a trainable module mapping standardised summaries
+    [N, x_dim] to the flow's context [N, E], trained jointly."""
+
     def __init__(self, cfg: FlowConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
-        self.flow = zuko.flows.NSF(theta_dim, x_dim, bins=cfg.bins, transforms=cfg.transforms,
+        self.embedding = embedding if embedding is not None else nn.Identity()
+        with torch.no_grad():
+            context = self.embedding(torch.zeros(2, x_dim)).shape[-1]
+        self.flow = zuko.flows.NSF(theta_dim, context, bins=cfg.bins, transforms=cfg.transforms,
                                    hidden_features=list(cfg.hidden))
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
-        self.net = nn.ModuleDict({"flow": self.flow, "x_norm": self.x_norm, "theta_norm": self.theta_norm})
+        self.net = nn.ModuleDict({"embedding": self.embedding, "flow": self.flow,
+                                  "x_norm": self.x_norm, "theta_norm": self.theta_norm})
         self.fitted = False
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
-        return -self.flow(x_std).log_prob(theta_std)
+        return -self.flow(self.embedding(x_std)).log_prob(theta_std)
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
         theta, x = theta.float(), x.float()
         if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
             torch.manual_seed(seed)
-            self.flow.apply(lambda m: m.reset_parameters() if isinstance(m, nn.Linear) else None)
+            self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
             self.x_norm.fit(x)
             self.theta_norm.fit(theta)
         history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
@@ -89,7 +96,7 @@ class Flow:
     def conditional(self, x_obs: torch.Tensor) -> FlowConditional:
         """q(theta | x_obs) for one summary x_obs [F], with sample and log_prob in parameter units."""
         self.net.eval()
-        dist = self.flow(self.x_norm(x_obs.float().reshape(-1)))
+        dist = self.flow(self.embedding(self.x_norm(x_obs.float().reshape(1, -1)))[0])
         return FlowConditional(dist, self.theta_norm.shift, self.theta_norm.scale)
 
     def state_dict(self) -> dict:
@@ -102,6 +109,4 @@ class Flow:
 
 @register("model", "flow", FlowConfig)
 def flow(cfg: FlowConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None) -> Flow:
-    if embedding is not None:
-        raise ConfigError("model=flow takes fixed summaries here; a learned summarizer (embedding) needs model=mdnn")
-    return Flow(cfg, theta_dim, x_dim)
+    return Flow(cfg, theta_dim, x_dim, embedding)

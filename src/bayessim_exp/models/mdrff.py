@@ -5,7 +5,8 @@ shift-invariant kernel k(x, x') = E_w cos(w . (x - x')) (Rahimi and Recht 2007):
 w ~ N(0, I / l^2), Matern nu for w ~ multivariate Student-t with 2 nu degrees of freedom scaled by
 1 / l. Quasi-random frequencies (scrambled Halton points through the inverse CDFs) cover the
 spectral density more evenly than i.i.d. draws. The frequencies are fixed; only the layers on
-top (optional hidden layers, then the mixture head shared with MDNN) are trained.
+top (optional hidden layers, then the mixture head shared with MDNN) and an optional embedding in
+front (learned summaries, as for MDNN) are trained.
 """
 
 from __future__ import annotations
@@ -84,10 +85,13 @@ class RandomFourierFeatures(nn.Module):
 class MDRFF(MDNN):
     """MDNN's training, conditioning and state handling around a random-Fourier-feature body."""
 
-    def __init__(self, cfg: MdrffConfig, theta_dim: int, x_dim: int):
+    def __init__(self, cfg: MdrffConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
-        self.rff = RandomFourierFeatures(x_dim, cfg.features)
-        layers, width = [self.rff], cfg.features
+        self.embedding = embedding if embedding is not None else nn.Identity()
+        with torch.no_grad():
+            self.feature_in_dim = self.embedding(torch.zeros(2, x_dim)).shape[-1]
+        self.rff = RandomFourierFeatures(self.feature_in_dim, cfg.features)
+        layers, width = [self.embedding, self.rff], cfg.features
         for h in cfg.hidden:
             layers += [nn.Linear(width, h), ACTIVATIONS[cfg.activation]()]
             width = h
@@ -100,13 +104,11 @@ class MDRFF(MDNN):
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
         if not self.fitted:  # frequencies are drawn once, with the first fit's seed, and then kept
             c = self.cfg
-            self.rff.frequencies.copy_(spectral_frequencies(self.x_dim, c.features // 2, c.kernel, c.lengthscale,
+            self.rff.frequencies.copy_(spectral_frequencies(self.feature_in_dim, c.features // 2, c.kernel, c.lengthscale,
                                                             c.quasi_random, seed))
         return super().fit(theta, x, seed=seed, label=label, on_epoch=on_epoch)
 
 
 @register("model", "mdrff", MdrffConfig)
 def mdrff(cfg: MdrffConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None) -> MDRFF:
-    if embedding is not None:
-        raise ConfigError("model=mdrff takes fixed summaries; a learned summarizer (embedding) needs model=mdnn or model=flow")
-    return MDRFF(cfg, theta_dim, x_dim)
+    return MDRFF(cfg, theta_dim, x_dim, embedding)

@@ -43,6 +43,15 @@ class LogUniform(Distribution):
         self._log_low, self._log_high = self.low.log(), self.high.log()
         super().__init__(event_shape=self.low.shape, validate_args=False)
 
+    @property
+    def mean(self) -> torch.Tensor:
+        return (self.high - self.low) / (self._log_high - self._log_low)
+
+    @property
+    def variance(self) -> torch.Tensor:
+        second = (self.high**2 - self.low**2) / (2 * (self._log_high - self._log_low))
+        return second - self.mean**2
+
     def sample(self, sample_shape=torch.Size()) -> torch.Tensor:
         u = torch.rand(*sample_shape, *self.low.shape, dtype=torch.float64)
         return torch.exp(self._log_low + u * (self._log_high - self._log_low))
@@ -79,6 +88,26 @@ class GaussianPrior(Distribution):
     def covariance_matrix(self) -> torch.Tensor:
         """Of the untruncated Gaussian."""
         return torch.diag(self.scale**2)
+
+    @property
+    def mean(self) -> torch.Tensor:
+        if self.low is None:
+            return self.loc
+        return self.loc + self.scale * self._truncation_terms()[0]
+
+    @property
+    def variance(self) -> torch.Tensor:
+        if self.low is None:
+            return self.scale**2
+        shift, spread = self._truncation_terms()
+        return self.scale**2 * (1 + spread - shift**2)
+
+    def _truncation_terms(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Truncated-normal moments: mean = loc + scale * t1, var = scale^2 (1 + t2 - t1^2)."""
+        a, b = (self.low - self.loc) / self.scale, (self.high - self.loc) / self.scale
+        pdf = lambda z: torch.exp(-0.5 * z**2) / math.sqrt(2 * math.pi)  # noqa: E731
+        mass = self._cdf_high - self._cdf_low
+        return (pdf(a) - pdf(b)) / mass, (a * pdf(a) - b * pdf(b)) / mass
 
     def sample(self, sample_shape=torch.Size()) -> torch.Tensor:
         shape = (*sample_shape, *self.loc.shape)

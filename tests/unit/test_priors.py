@@ -50,3 +50,11 @@ def test_registry_builds_every_prior_from_its_yaml_keys():
     untruncated = build("prior", {"name": "gaussian", "truncate": False}, spec=_Spec())
     assert untruncated.low is None
     torch.testing.assert_close(untruncated.scale, (HIGH - LOW) / 4)
+
+
+def test_prior_moments_match_their_samples():
+    for prior in (LogUniform(LOW, HIGH), GaussianPrior(torch.tensor([1.0, 2.9]), torch.tensor([2.0, 0.3]), LOW, HIGH)):
+        torch.manual_seed(0)
+        s = prior.sample((200_000,))
+        torch.testing.assert_close(prior.mean, s.mean(0), atol=0.02, rtol=0)
+        torch.testing.assert_close(prior.stddev, s.std(0), atol=0.02, rtol=0)

@@ -45,3 +45,10 @@ class Restricted:
             got.append(draw)
             have += len(draw)
         return torch.cat(got)[:n].reshape(*shape, self.dim)
+
+    def moments(self, num: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
+        """Monte Carlo mean and standard deviation (fixed seed, so repeatable)."""
+        with torch.random.fork_rng():
+            torch.manual_seed(12345)
+            s = self.sample((num,))
+        return s.mean(0), s.std(0)

@@ -105,3 +105,19 @@ def test_mdrff_rejects_an_odd_number_of_features():
 
     with pytest.raises(ConfigError, match="features must be an even integer"):
         build("model", {"name": "mdrff", "features": 201}, theta_dim=2, x_dim=3)
+
+
+@pytest.mark.parametrize("name", list(CONFIGS))
+def test_api_fit_save_load_round_trip(name, tmp_path):
+    from bayessim_exp import api
+
+    torch.set_num_threads(1)
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 300, seed=0)
+    cfg = {**CONFIGS[name], "max_epochs": 3}
+    fitted = api.fit_posterior_model(name, theta, SIM.simulate(theta, seed=1), prior=PRIOR, **cfg)
+    fitted.save(tmp_path / "model.pt")
+    loaded = api.FittedPosterior.load(tmp_path / "model.pt")
+    xs = SIM.simulate(TRUE_THETAS, seed=14)
+    probe = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 20, seed=4)
+    torch.testing.assert_close(loaded.posterior(xs[0]).log_prob(probe), fitted.posterior(xs[0]).log_prob(probe))
+    assert loaded.posterior(xs).sample((5,)).shape == (5, 2)  # several observations, any model

@@ -121,3 +121,15 @@ def test_api_fit_save_load_round_trip(name, tmp_path):
     probe = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 20, seed=4)
     torch.testing.assert_close(loaded.posterior(xs[0]).log_prob(probe), fitted.posterior(xs[0]).log_prob(probe))
     assert loaded.posterior(xs).sample((5,)).shape == (5, 2)  # several observations, any model
+
+
+@pytest.mark.parametrize("name", ["mdrff", "flow"])
+def test_nan_in_training_names_the_round_and_step(name):
+    from bayessim_exp.errors import TrainingError
+
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 300, seed=0)
+    x = SIM.simulate(theta, seed=1)
+    x[7, 1] = float("nan")
+    model = build("model", {"name": name, **CONFIGS[name], "max_epochs": 2}, theta_dim=2, x_dim=3)
+    with pytest.raises(TrainingError, match=r"round 3: (validation )?loss became nan at epoch 0, step \d+"):
+        model.fit(theta, x, seed=0, label="round 3")

@@ -233,9 +233,13 @@ class Pipeline:
         if r not in self._proposals:
             previous, seed = self.posterior(r - 1), stage_seed(self.rc.seed, r, "collect")
             self._proposals[r] = {"posterior": lambda: previous,
-                                  "gaussian": lambda: moment_matched(previous, seed=seed),
+                                  "gaussian": lambda: moment_matched(previous, *self._box(), seed=seed),
                                   "truncated": lambda: TruncatedPrior(self.comp.prior, previous, seed=seed)}[self.rc.proposal]()
         return self._proposals[r]
+
+    def _box(self) -> tuple[torch.Tensor, torch.Tensor]:
+        spec = self.comp.task.spec
+        return torch.as_tensor(spec.low, dtype=torch.float64), torch.as_tensor(spec.high, dtype=torch.float64)
 
     def posterior(self, r: int):
         """Round r's posterior, rebuilt from its fit and real artifacts when resuming."""

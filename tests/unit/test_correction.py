@@ -94,7 +94,7 @@ def test_moment_matched_proposal_keeps_the_correction_in_closed_form():
     box = BoxUniform(low, high)
     previous = TruncatedMixture(GaussianMixture(torch.zeros(2), torch.tensor([[0.0, 0.0], [1.0, 0.5]]),
                                                 torch.eye(2).expand(2, 2, 2) * 0.3), low, high)
-    proposal = moment_matched(previous)
+    proposal = moment_matched(previous, low, high)
     assert isinstance(proposal, TruncatedMixture) and proposal.mixture.num_components == 1
     torch.testing.assert_close(proposal.mixture.mean, previous.moments()[0], atol=0.03, rtol=0)
     q = _single(torch.tensor([0.4, 0.2]), 0.05 * torch.eye(2))

@@ -52,8 +52,10 @@ class TruncatedPrior:
         return torch.cat(got)[:n].reshape(*shape, -1)
 
 
-def moment_matched(posterior, num: int = 20_000, seed: int = 0):
-    """A single Gaussian with the posterior's mean and covariance, truncated to its box if it has one.
+def moment_matched(posterior, low: torch.Tensor | None = None, high: torch.Tensor | None = None,
+                   num: int = 20_000, seed: int = 0):
+    """A single Gaussian with the posterior's mean and covariance, truncated to [low, high] when given
+    (the prior's box: simulated parameters must stay in range).
 
     As the next round's proposal it keeps the SNPE-A correction of mixture models in closed form.
     """
@@ -63,5 +65,4 @@ def moment_matched(posterior, num: int = 20_000, seed: int = 0):
     cov = torch.cov(draws.T).reshape(draws.shape[1], draws.shape[1])
     cov = cov + 1e-9 * cov.diagonal().mean() * torch.eye(cov.shape[0], dtype=cov.dtype)
     gaussian = GaussianMixture(torch.zeros(1), draws.mean(0, keepdim=True), cov[None])
-    low, high = getattr(posterior, "low", None), getattr(posterior, "high", None)
     return gaussian if low is None else TruncatedMixture(gaussian, low, high, seed=seed)

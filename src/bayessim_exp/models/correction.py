@@ -20,7 +20,6 @@ See docs/statistics.md for the assumptions.
 from __future__ import annotations
 
 import logging
-import math
 from typing import Sequence
 
 import torch

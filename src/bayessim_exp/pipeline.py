@@ -25,6 +25,7 @@ from . import registry
 from .artifacts import RunDir
 from .errors import ConfigError
 from .diagnostics.coverage import expected_coverage
+from .diagnostics.predictive import predictive_distances
 from .inference.bayessim import condition
 from .models.mixture import TruncatedMixture
 from .models.proposals import TruncatedPrior, moment_matched
@@ -62,6 +63,7 @@ class DiagnosticsConfig:
     held_out_fraction: float = 0.1  # of each round's simulations, kept out of training for the coverage check
     coverage_samples: int = 500  # posterior draws per held-out simulation
     levels: list[float] = dataclasses.field(default_factory=lambda: [0.5, 0.9])
+    predictive_sims: int = 200  # simulations at posterior and at prior draws for the predictive check (0: off)
 
 
 @dataclasses.dataclass
@@ -103,9 +105,10 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
     if rc.proposal not in PROPOSALS:
         raise ConfigError(f"proposal={rc.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
     d = rc.diagnostics
-    if not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels):
+    if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
+            or d.predictive_sims < 0):
         raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
-                          "diagnostics.levels in (0, 1)")
+                          "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0")
     return rc
 
 
@@ -336,6 +339,7 @@ class Pipeline:
             self.tb.scalars(r, {"posterior/log_prob_true": record["log_prob_true_posterior"],
                                 "posterior/log_prob_gain_over_prior": record["log_prob_gain"],
                                 "sim/diverged": record["diverged"],
+                                **{f"predictive_distance/{k}": v for k, v in (record["predictive_distance"] or {}).items()},
                                 **{f"coverage/{kind}_{level}": value
                                    for kind, levels in (record["coverage"] or {}).items() for level, value in levels.items()}})
         if self._tb is not None:
@@ -352,6 +356,7 @@ class Pipeline:
             "posterior_std": dict(zip(names, std.tolist())),
             "prior_std": dict(zip(names, prior.stddev.double().tolist())),
             "log_prob_true_posterior": None, "log_prob_true_prior": None, "log_prob_gain": None,
+            "predictive_distance": self._predictive(r, posterior, x_real),
         }
         if true is not None:
             t = torch.as_tensor(true, dtype=torch.float64)[None]
@@ -364,6 +369,21 @@ class Pipeline:
         # mixtures are stored; other posteriors (flows, importance-weighted) are rebuilt from the fit and real artifacts
         state = posterior.state_dict() if isinstance(posterior, TruncatedMixture) else None
         return {"posterior": state, "metrics": metrics}
+
+
+    def _predictive(self, r: int, posterior, x_real: torch.Tensor) -> dict | None:
+        num = self.rc.diagnostics.predictive_sims
+        if num == 0:
+            return None
+        seed = stage_seed(self.rc.seed, r, "condition")
+
+        def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
+            traj = simulate(self.comp, theta.numpy(), self.comp.policy(self.cfg, seed), self.rc.collect.horizon,
+                            np.random.default_rng(seed), self.rc.collect.chunk, False).to(self.device)
+            x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
+            return x[torch.isfinite(x).all(1)]
+
+        return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, seed)
 
 
 class _Stop(Exception):

@@ -22,9 +22,9 @@ from omegaconf import OmegaConf
 from . import registry
 from .inference.bayessim import condition
 from .models.mixture import TruncatedMixture
-from .priors import BoxUniform
+from .priors import BoxUniform, GaussianPrior, LogUniform
 
-__all__ = ["BoxUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
+__all__ = ["BoxUniform", "GaussianPrior", "LogUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
 
 CONF_DIR = Path(__file__).parent / "conf"
 
@@ -38,22 +38,22 @@ class FittedPosterior:
     history: dict
     max_components: int = 50
 
-    def posterior(self, x_obs: torch.Tensor):
-        """The posterior given one summary [F] or several i.i.d. ones [n, F]."""
-        return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components)
+    def posterior(self, x_obs: torch.Tensor, proposal=None):
+        """The posterior given one summary [F] or several i.i.d. ones [n, F]; `proposal`: what the
+        training parameters were drawn from, if not the prior (SNPE-A correction)."""
+        return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components, proposal=proposal)
 
     def save(self, path: str | Path) -> None:
         torch.save({"name": self.name, "config": self.config, "state": self.model.state_dict(),
                     "theta_dim": self.model.theta_dim, "x_dim": self.model.x_dim, "history": self.history,
-                    "prior": None if self.prior is None else (self.prior.low, self.prior.high)}, path)
+                    "prior": self.prior}, path)  # priors are small torch distributions: pickled whole
 
     @classmethod
     def load(cls, path: str | Path) -> "FittedPosterior":
         d = torch.load(path, weights_only=False)
         model = registry.build("model", {"name": d["name"], **d["config"]}, theta_dim=d["theta_dim"], x_dim=d["x_dim"])
         model.load_state_dict(d["state"])
-        prior = None if d["prior"] is None else BoxUniform(*d["prior"])
-        return cls(d["name"], model, prior, d["config"], d["history"])
+        return cls(d["name"], model, d["prior"], d["config"], d["history"])
 
 
 def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=None, seed: int = 0,
@@ -89,10 +89,14 @@ class Run:
     results: dict
     config: Any
 
-    def posterior(self, round_index: int | None = None) -> TruncatedMixture:
+    def posterior(self, round_index: int | None = None):
         r = round_index or len(self.results["rounds"])
         state = torch.load(self.path / f"round_{r:03d}" / "condition.pt", weights_only=False)["posterior"]
-        return TruncatedMixture.from_state_dict(state)
+        if state is not None:
+            return TruncatedMixture.from_state_dict(state)
+        from .pipeline import Pipeline  # flows and importance-weighted posteriors: rebuilt from the artifacts
+
+        return Pipeline(self.config, self.path).posterior(r)
 
 
 def load_run(path: str | Path) -> Run:

@@ -1,8 +1,10 @@
 """The BayesSim round loop, stage by stage, resumable from the last finished stage.
 
-Each round: collect (simulate trajectories with parameters from the prior) -> summarize ->
-fit (the posterior model on every round's simulations so far) -> real (new real trajectories)
--> condition (the posterior given all real trajectories). Each stage's result is written
+Each round: collect (simulate trajectories with parameters from the round's proposal: the
+prior, or one built from the previous round's posterior, see `proposal`) -> summarize -> fit
+(the posterior model; held-out simulations give its expected coverage) -> real (new real
+trajectories) -> condition (the posterior given all real trajectories, with the SNPE-A
+correction for the proposal). Each stage's result is written
 atomically to the run dir before the next starts; a rerun in the same dir skips what is there.
 """
 
@@ -22,12 +24,25 @@ from omegaconf.errors import OmegaConfBaseException
 from . import registry
 from .artifacts import RunDir
 from .errors import ConfigError
+from .diagnostics.coverage import expected_coverage
+from .diagnostics.predictive import predictive_distances
 from .inference.bayessim import condition
+from .models.mixture import TruncatedMixture
+from .models.proposals import TruncatedPrior, moment_matched
 from .sim.trajectories import Trajectories
 
 log = logging.getLogger(__name__)
 
 STAGES = ("collect", "summarize", "fit", "real", "condition")
+
+# proposal -> how rounds after the first draw their parameters (docs/statistics.md):
+#   prior      always the prior; every round's simulations train the model
+#   posterior  the previous posterior itself (SNPE-A; closed form only for one-component mixtures)
+#   gaussian   the previous posterior moment-matched to one Gaussian (SNPE-A in closed form for mixtures)
+#   truncated  the prior restricted to the previous posterior's 99.9 % HPD region (TSNPE, no correction)
+PROPOSALS = ("prior", "posterior", "gaussian", "truncated")
+# SNPE-A needs the model trained on draws from a single proposal: the current round's simulations only
+_SINGLE_ROUND_PROPOSALS = ("posterior", "gaussian")
 
 
 @dataclasses.dataclass
@@ -41,6 +56,14 @@ class CollectConfig:
 @dataclasses.dataclass
 class ConditionConfig:
     max_components: int = 50
+
+
+@dataclasses.dataclass
+class DiagnosticsConfig:
+    held_out_fraction: float = 0.1  # of each round's simulations, kept out of training for the coverage check
+    coverage_samples: int = 500  # posterior draws per held-out simulation
+    levels: list[float] = dataclasses.field(default_factory=lambda: [0.5, 0.9])
+    predictive_sims: int = 200  # simulations at posterior and at prior draws for the predictive check (0: off)
 
 
 @dataclasses.dataclass
@@ -61,8 +84,10 @@ class RunConfig:
     device: str = "cpu"
     plugins: list[str] = dataclasses.field(default_factory=list)
     run_name: str = ""
+    proposal: str = "prior"
     collect: CollectConfig = dataclasses.field(default_factory=CollectConfig)
     condition: ConditionConfig = dataclasses.field(default_factory=ConditionConfig)
+    diagnostics: DiagnosticsConfig = dataclasses.field(default_factory=DiagnosticsConfig)
     logging: LoggingConfig = dataclasses.field(default_factory=LoggingConfig)
 
 
@@ -77,6 +102,13 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
         raise ConfigError("need iterations >= 1, collect.trajectories >= 20, collect.horizon >= 1, collect.chunk >= 1")
     if rc.condition.max_components < 1 or rc.logging.max_plot_params < 1 or rc.logging.plot_samples < 10:
         raise ConfigError("need condition.max_components >= 1, logging.max_plot_params >= 1, logging.plot_samples >= 10")
+    if rc.proposal not in PROPOSALS:
+        raise ConfigError(f"proposal={rc.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
+    d = rc.diagnostics
+    if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
+            or d.predictive_sims < 0):
+        raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
+                          "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0")
     return rc
 
 
@@ -144,6 +176,8 @@ class Pipeline:
         self.run_dir.bind_config(cfg)
         self.device = torch.device(self.rc.device)
         self._tb = None
+        self._posteriors: dict[int, Any] = {}
+        self._proposals: dict[int, Any] = {}
 
     @property
     def tb(self):
@@ -159,7 +193,7 @@ class Pipeline:
         seed = stage_seed(self.rc.seed, r, "collect")
         with torch.random.fork_rng():
             torch.manual_seed(seed)
-            theta = self.comp.prior.sample((self.rc.collect.trajectories,)).double()
+            theta = self.proposal(r).sample((self.rc.collect.trajectories,)).double()
         policy = self.comp.policy(self.cfg, seed)
         traj = simulate(self.comp, theta.numpy(), policy, self.rc.collect.horizon,
                         np.random.default_rng(seed), self.rc.collect.chunk, self.rc.logging.progress)
@@ -176,13 +210,47 @@ class Pipeline:
                 "collect_seconds": collected["seconds"]}
 
     def fit(self, r: int, model) -> dict:
-        data = [self.run_dir.load(k, "summarize") for k in range(1, r + 1)]
-        theta = torch.cat([d["theta"] for d in data])
-        x = torch.cat([d["x"] for d in data])
+        first = r if self.rc.proposal in _SINGLE_ROUND_PROPOSALS else 1
+        data = [self._split(self.run_dir.load(k, "summarize")) for k in range(first, r + 1)]
+        theta = torch.cat([d[0] for d in data])
+        x = torch.cat([d[1] for d in data])
         if r > 1 and self.rc.ftune:
             model.load_state_dict(self.run_dir.load(r - 1, "fit")["model"])
         history = model.fit(theta, x, seed=stage_seed(self.rc.seed, r, "fit"), label=f"round {r}")
-        return {"model": model.state_dict(), "history": history, "num_train": len(theta)}
+        theta_val, x_val = data[-1][2], data[-1][3]
+        d = self.rc.diagnostics
+        coverage = None if len(theta_val) == 0 else expected_coverage(
+            model, theta_val, x_val, d.levels, d.coverage_samples, seed=stage_seed(self.rc.seed, r, "fit"))
+        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage}
+
+    def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
+        """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
+        n_val = int(self.rc.diagnostics.held_out_fraction * len(summary["theta"]))
+        cut = len(summary["theta"]) - n_val
+        return summary["theta"][:cut], summary["x"][:cut], summary["theta"][cut:], summary["x"][cut:]
+
+    def proposal(self, r: int):
+        """The distribution round r draws its parameters from (see PROPOSALS)."""
+        if r == 1 or self.rc.proposal == "prior":
+            return self.comp.prior
+        if r not in self._proposals:
+            previous, seed = self.posterior(r - 1), stage_seed(self.rc.seed, r, "collect")
+            self._proposals[r] = {"posterior": lambda: previous,
+                                  "gaussian": lambda: moment_matched(previous, *self._box(), seed=seed),
+                                  "truncated": lambda: TruncatedPrior(self.comp.prior, previous, seed=seed)}[self.rc.proposal]()
+        return self._proposals[r]
+
+    def _box(self) -> tuple[torch.Tensor, torch.Tensor]:
+        spec = self.comp.task.spec
+        return torch.as_tensor(spec.low, dtype=torch.float64), torch.as_tensor(spec.high, dtype=torch.float64)
+
+    def posterior(self, r: int):
+        """Round r's posterior, rebuilt from its fit and real artifacts when resuming."""
+        if r not in self._posteriors:
+            model = self.comp.model(self.cfg)
+            model.load_state_dict(self.run_dir.load(r, "fit")["model"])
+            self._posteriors[r] = self.condition(r, model, self.run_dir.load(r, "real")["x"])
+        return self._posteriors[r]
 
     def real(self, r: int) -> dict:
         seed = stage_seed(self.rc.seed, r, "real")
@@ -198,7 +266,10 @@ class Pipeline:
         return {"x": x, "new": len(x_new), "traj": traj.state_dict()}
 
     def condition(self, r: int, model, x_real: torch.Tensor):
-        return condition(model, x_real, self.comp.prior, self.rc.condition.max_components)
+        post = condition(model, x_real, self.comp.prior, self.rc.condition.max_components, proposal=self.proposal(r),
+                         seed=stage_seed(self.rc.seed, r, "condition"))
+        self._posteriors[r] = post
+        return post
 
     # the loop ------------------------------------------------------------------------
     def run(self, stop_after: tuple[int, str] | None = None) -> dict:
@@ -257,6 +328,8 @@ class Pipeline:
                 "epochs": hist["epochs"],
                 "train_loss": hist["train"][-1],
                 "val_loss": hist["best_val"],
+                "proposal": "prior" if r == 1 else self.rc.proposal,
+                "coverage": fitted.get("coverage"),
                 **cond["metrics"],
                 "surrogate_real_return": None,
                 "seconds": seconds,
@@ -265,7 +338,10 @@ class Pipeline:
             self.run_dir.write_json("results.json", results)
             self.tb.scalars(r, {"posterior/log_prob_true": record["log_prob_true_posterior"],
                                 "posterior/log_prob_gain_over_prior": record["log_prob_gain"],
-                                "sim/diverged": record["diverged"]})
+                                "sim/diverged": record["diverged"],
+                                **{f"predictive_distance/{k}": v for k, v in (record["predictive_distance"] or {}).items()},
+                                **{f"coverage/{kind}_{level}": value
+                                   for kind, levels in (record["coverage"] or {}).items() for level, value in levels.items()}})
         if self._tb is not None:
             self._tb.close()
         return results
@@ -280,6 +356,7 @@ class Pipeline:
             "posterior_std": dict(zip(names, std.tolist())),
             "prior_std": dict(zip(names, prior.stddev.double().tolist())),
             "log_prob_true_posterior": None, "log_prob_true_prior": None, "log_prob_gain": None,
+            "predictive_distance": self._predictive(r, posterior, x_real),
         }
         if true is not None:
             t = torch.as_tensor(true, dtype=torch.float64)[None]
@@ -289,7 +366,24 @@ class Pipeline:
         lc = self.rc.logging
         plot_names = list(lc.plot_params) if lc.plot_params is not None else names[: lc.max_plot_params]
         self.tb.posterior(r, posterior, prior, names, plot_names, true, lc.plot_samples)
-        return {"posterior": posterior.state_dict(), "metrics": metrics}
+        # mixtures are stored; other posteriors (flows, importance-weighted) are rebuilt from the fit and real artifacts
+        state = posterior.state_dict() if isinstance(posterior, TruncatedMixture) else None
+        return {"posterior": state, "metrics": metrics}
+
+
+    def _predictive(self, r: int, posterior, x_real: torch.Tensor) -> dict | None:
+        num = self.rc.diagnostics.predictive_sims
+        if num == 0:
+            return None
+        seed = stage_seed(self.rc.seed, r, "condition")
+
+        def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
+            traj = simulate(self.comp, theta.numpy(), self.comp.policy(self.cfg, seed), self.rc.collect.horizon,
+                            np.random.default_rng(seed), self.rc.collect.chunk, False).to(self.device)
+            x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
+            return x[torch.isfinite(x).all(1)]
+
+        return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, seed)
 
 
 class _Stop(Exception):

@@ -39,6 +39,8 @@ _BUILTIN_MODULES = (
     "bayessim_exp.summarizers.signature",
     "bayessim_exp.summarizers.learned",
     "bayessim_exp.models.mdnn",
+    "bayessim_exp.models.mdrff",
+    "bayessim_exp.models.flow",
     "bayessim_exp.real",
     "bayessim_exp.sim.native",
     "bayessim_exp.rl.none",

@@ -18,7 +18,7 @@ from ..registry import register
 from .base import Standardizer, TrainConfig, train_density
 from .mixture import GaussianMixture
 
-_ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
+ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 
 
 @dataclasses.dataclass
@@ -34,8 +34,8 @@ class MdnnConfig(TrainConfig):
             raise ConfigError(f"components must be an integer >= 1, got {self.components}")
         if not self.hidden or any(h < 1 for h in self.hidden):
             raise ConfigError(f"hidden must be a non-empty list of positive layer sizes, got {self.hidden}")
-        if self.activation not in _ACTIVATIONS:
-            raise ConfigError(f"activation {self.activation!r} not allowed; allowed: {', '.join(_ACTIVATIONS)}")
+        if self.activation not in ACTIVATIONS:
+            raise ConfigError(f"activation {self.activation!r} not allowed; allowed: {', '.join(ACTIVATIONS)}")
         if self.covariance not in ("full", "diagonal"):
             raise ConfigError(f"covariance {self.covariance!r} not allowed; allowed: full, diagonal")
 
@@ -75,7 +75,7 @@ class MDNN:
 
     def __init__(self, cfg: MdnnConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
-        act = _ACTIVATIONS[cfg.activation]
+        act = ACTIVATIONS[cfg.activation]
         self.embedding = embedding if embedding is not None else nn.Identity()
         with torch.no_grad():
             width = self.embedding(torch.zeros(2, x_dim)).shape[-1]

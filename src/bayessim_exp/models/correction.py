@@ -1,0 +1,184 @@
+"""The posterior given one or several real summaries, with the SNPE-A proposal correction.
+
+A model trained on simulations with theta ~ p~(theta) estimates q(theta | x) proportional to
+p~(theta) p(x | theta). With real summaries x_1..x_n that are independent given theta, and
+q_i trained under proposal p~_i,
+
+    p(theta | x_1..n)  proportional to  p(theta) * prod_i q_i(theta | x_i) / p~_i(theta).
+
+(With p~_i = p this is the product of per-trajectory posteriors divided by p^(n-1).)
+For Gaussian-mixture q_i and Gaussian or box-uniform p and p~_i the right-hand side is a
+Gaussian mixture (truncated to the prior's box) in closed form: the product of the q_i is a
+mixture (pruned to `max_components` after every factor), and the Gaussian ratio
+N(mu0, S0) / prod N(mu_i, S_i) adds Lambda = S0^-1 - sum S_i^-1 to every component's precision.
+When a component's precision is not positive definite, or a factor is not Gaussian (flows,
+log-uniform priors, mixture proposals), the same unnormalised density is used exactly through
+importance sampling (models/importance.py), and a warning says so.
+See docs/statistics.md for the assumptions.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Sequence
+
+import torch
+
+from ..priors import BoxUniform, GaussianPrior
+from .importance import DefensiveMixture, ImportancePosterior
+from .mixture import GaussianMixture, TruncatedMixture
+from .proposals import TruncatedPrior
+from .restricted import Restricted
+
+log = logging.getLogger(__name__)
+
+# importance fallback: base draws, and covariance inflation of the base's defensive half
+_IS_DRAWS = 100_000
+_INFLATE = 4.0
+_MOMENT_DRAWS = 4000
+
+
+def _gaussian_factor(dist) -> tuple[torch.Tensor, torch.Tensor] | None | str:
+    """(mean, cov) if dist is Gaussian on its support, None if constant there, "other" if neither."""
+    if dist is None or isinstance(dist, BoxUniform):  # None: an improper flat prior
+        return None
+    if isinstance(dist, GaussianPrior):
+        return dist.loc, dist.covariance_matrix
+    mixture = dist.mixture if isinstance(dist, TruncatedMixture) else dist
+    if isinstance(mixture, GaussianMixture) and mixture.num_components == 1:
+        return mixture.means[0], mixture.covs[0]
+    return "other"
+
+
+def _box(dist) -> tuple[torch.Tensor, torch.Tensor] | None:
+    low, high = getattr(dist, "low", None), getattr(dist, "high", None)
+    return None if low is None or high is None else (torch.as_tensor(low).double(), torch.as_tensor(high).double())
+
+
+def _needs_no_correction(proposal, prior) -> bool:
+    """The prior itself, or the prior truncated to a high-density region (constant ratio there)."""
+    return proposal is None or proposal is prior or (isinstance(proposal, TruncatedPrior) and proposal.prior is prior)
+
+
+def _check_covers(prior, proposal) -> None:
+    """SNPE-A needs p~ > 0 wherever p > 0: a proposal box must contain the prior's."""
+    pb, qb = _box(prior), _box(proposal)
+    if qb is not None and (pb is None or (qb[0] > pb[0]).any() or (qb[1] < pb[1]).any()):
+        raise ValueError("the proposal's support must contain the prior's for the SNPE-A correction")
+
+
+def _natural(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    prec = torch.cholesky_inverse(torch.linalg.cholesky(cov.double()))
+    return prec, prec @ mean.double()
+
+
+def _apply_gaussian_ratio(mix: GaussianMixture, lam: torch.Tensor, eta: torch.Tensor) -> GaussianMixture | None:
+    """mix(theta) * exp(-theta^T lam theta / 2 + eta^T theta), renormalised; None if a precision is not PD.
+
+    Component k gets precision P_k = S_k^-1 + lam and weight w_k * integral of the product:
+    log c_k = -1/2 log|S_k| - 1/2 log|P_k| - 1/2 m_k^T S_k^-1 m_k + 1/2 e_k^T P_k^-1 e_k, e_k = S_k^-1 m_k + eta.
+    """
+    s_inv = torch.cholesky_inverse(mix.scale_tril)
+    prec = s_inv + lam
+    chol, info = torch.linalg.cholesky_ex(0.5 * (prec + prec.transpose(-1, -2)))
+    if (info != 0).any():
+        return None
+    e = (s_inv @ mix.means.unsqueeze(-1)).squeeze(-1) + eta
+    new_means = torch.cholesky_solve(e.unsqueeze(-1), chol).squeeze(-1)
+    logdet_s = 2 * torch.log(torch.diagonal(mix.scale_tril, dim1=-2, dim2=-1)).sum(-1)
+    logdet_p = 2 * torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
+    quad_m = (mix.means * (s_inv @ mix.means.unsqueeze(-1)).squeeze(-1)).sum(-1)
+    quad_e = (e * new_means).sum(-1)
+    log_c = -0.5 * logdet_s - 0.5 * logdet_p - 0.5 * quad_m + 0.5 * quad_e
+    return GaussianMixture(mix.log_weights + log_c, new_means, torch.cholesky_inverse(chol))
+
+
+def _moment_gaussian(dist) -> GaussianMixture:
+    if isinstance(dist, GaussianMixture):
+        return dist
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        s = dist.sample((_MOMENT_DRAWS,)).double()
+    return GaussianMixture(torch.zeros(1), s.mean(0, keepdim=True), torch.cov(s.T).reshape(1, s.shape[1], s.shape[1]))
+
+
+def _product(mixtures: Sequence[GaussianMixture], max_components: int) -> GaussianMixture:
+    out = mixtures[0].prune(max_components)
+    for m in mixtures[1:]:
+        out = out.product(m).prune(max_components)
+    return out
+
+
+def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = 50, seed: int = 0):
+    """p(theta | x_1..n) from q(theta | x_i) for each real summary (see the module docstring).
+
+    conditionals: one q(theta | x_i) per real summary, GaussianMixtures (closed form) or any
+        distribution with sample/log_prob (flows).
+    prior: the prior p; its box (`low`/`high`), when it has one, is the posterior's support; None is
+        an improper flat prior.
+    proposal: p~, the distribution the training simulations were drawn from; None, the prior itself
+        or a TruncatedPrior of it mean no correction; a list gives one proposal per conditional.
+    Returns a distribution with sample(shape) and log_prob(theta).
+    """
+    n = len(conditionals)
+    if n == 0:
+        raise ValueError("posterior needs at least one real summary")
+    proposals = list(proposal) if isinstance(proposal, (list, tuple)) else [proposal] * n
+    if len(proposals) != n:
+        raise ValueError(f"{len(proposals)} proposals for {n} real summaries")
+    corrected = [p for p in proposals if not _needs_no_correction(p, prior)]
+    for p in corrected:
+        _check_covers(prior, p)
+    prior_power = 1 - (n - len(corrected))  # p * prod over uncorrected factors of 1/p
+    box = _box(prior)
+
+    def log_target(theta: torch.Tensor) -> torch.Tensor:
+        theta = theta.double()
+        lp = torch.zeros(theta.shape[:-1], dtype=torch.float64) if prior is None else prior.log_prob(theta).double()
+        out = sum(q.log_prob(theta).double() for q in conditionals) + (prior_power * lp if prior_power else 0.0)
+        for p in corrected:
+            out = out - p.log_prob(theta).double()
+        return torch.where(torch.isfinite(lp), out, torch.tensor(-torch.inf, dtype=out.dtype))
+
+    reason = _closed_form_obstacle(conditionals, prior, prior_power, corrected)
+    if reason is None:
+        mix = _product(conditionals, max_components)
+        lam, eta = _ratio_natural(prior, prior_power, corrected, mix.dim)
+        result = mix if lam is None else _apply_gaussian_ratio(mix, lam, eta)
+        if result is not None:
+            return result if box is None else TruncatedMixture(result, *box, seed=seed)
+        reason = "a component's corrected precision is not positive definite"
+    elif n == 1 and prior_power == 0 and not corrected:
+        q = conditionals[0]  # a flow trained on prior draws: its density is the posterior up to the support
+        return q if box is None else Restricted(q, *box, seed=seed)
+    base_mix = _product([_moment_gaussian(q) for q in conditionals], max_components)
+    inflated = GaussianMixture(base_mix.log_weights, base_mix.means, _INFLATE * base_mix.covs)
+    parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
+    result = ImportancePosterior(log_target, DefensiveMixture(parts), num=_IS_DRAWS, seed=seed)
+    log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample size %.0f",
+                reason, _IS_DRAWS, result.ess)
+    return result
+
+
+def _closed_form_obstacle(conditionals, prior, prior_power: int, corrected: list) -> str | None:
+    if not all(isinstance(q, GaussianMixture) for q in conditionals):
+        return "the conditional density is not a Gaussian mixture"
+    if prior_power != 0 and _gaussian_factor(prior) == "other":
+        return f"the prior ({type(prior).__name__}) is neither Gaussian nor uniform"
+    for p in corrected:
+        if isinstance(_gaussian_factor(p), str):
+            return f"the proposal ({type(p).__name__}) is not a single Gaussian or uniform"
+    return None
+
+
+def _ratio_natural(prior, prior_power: int, corrected: list, dim: int):
+    """Natural parameters (lam, eta) of p^prior_power / prod p~_i, or (None, None) if constant."""
+    lam = torch.zeros(dim, dim, dtype=torch.float64)
+    eta = torch.zeros(dim, dtype=torch.float64)
+    constant = True
+    factors = [(prior_power, _gaussian_factor(prior))] + [(-1, _gaussian_factor(p)) for p in corrected]
+    for power, factor in factors:
+        if power != 0 and factor is not None:
+            prec, shift = _natural(*factor)
+            lam, eta, constant = lam + power * prec, eta + power * shift, False
+    return (None, None) if constant else (lam, eta)

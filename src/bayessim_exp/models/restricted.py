@@ -1,0 +1,54 @@
+"""Any distribution restricted to a box and renormalised (flows' posteriors on the prior's support)."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+
+class Restricted:
+    """dist restricted to [low, high]; the mass inside is a Monte Carlo estimate from `num_mc` draws,
+    sampling is exact by rejection."""
+
+    def __init__(self, dist, low: torch.Tensor, high: torch.Tensor, num_mc: int = 50_000, seed: int = 0):
+        self.dist, self.low, self.high = dist, low.double(), high.double()
+        with torch.random.fork_rng():
+            torch.manual_seed(seed)
+            inside = self._inside(dist.sample((num_mc,)).double()).double().mean()
+        if inside <= 0:
+            raise ValueError("the posterior puts no measurable mass inside the prior's support; "
+                             "the real data may not match the simulator or the model is badly fitted")
+        self.mass_inside = float(inside)
+        self._log_mass = math.log(self.mass_inside)
+
+    def _inside(self, theta: torch.Tensor) -> torch.Tensor:
+        return ((theta >= self.low) & (theta <= self.high)).all(-1)
+
+    @property
+    def dim(self) -> int:
+        return self.low.shape[0]
+
+    def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
+        theta = theta.double()
+        lp = self.dist.log_prob(theta).double() - self._log_mass
+        return torch.where(self._inside(theta), lp, torch.tensor(-torch.inf, dtype=lp.dtype))
+
+    @torch.no_grad()
+    def sample(self, shape: tuple[int, ...] = (1,)) -> torch.Tensor:
+        n = math.prod(shape)
+        got, have = [], 0
+        batch = max(64, int(1.2 * n / self.mass_inside))
+        while have < n:
+            draw = self.dist.sample((batch,)).double()
+            draw = draw[self._inside(draw)]
+            got.append(draw)
+            have += len(draw)
+        return torch.cat(got)[:n].reshape(*shape, self.dim)
+
+    def moments(self, num: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
+        """Monte Carlo mean and standard deviation (fixed seed, so repeatable)."""
+        with torch.random.fork_rng():
+            torch.manual_seed(12345)
+            s = self.sample((num,))
+        return s.mean(0), s.std(0)

@@ -1,0 +1,135 @@
+"""Every posterior model against the linear-Gaussian simulator's closed-form posteriors.
+
+Tolerances: posterior means within 0.5 posterior standard deviations of the analytic ones,
+standard deviations within a factor 1.33 (4000 simulations, small networks, fixed seeds).
+"""
+
+import pytest
+import torch
+
+from bayessim_exp.models.correction import posterior
+from bayessim_exp.models.mixture import GaussianMixture
+from bayessim_exp.priors import GaussianPrior
+from bayessim_exp.registry import build
+from linear_gaussian import LinearGaussian, gaussian_draws
+
+A = torch.tensor([[1.0, 0.5], [-0.3, 2.0], [0.7, 0.0]])
+SIM = LinearGaussian(A, torch.tensor([0.1, -0.2, 0.3]), 0.2 * torch.eye(3))
+PRIOR = GaussianPrior(torch.tensor([1.0, -0.5]), torch.tensor([1.5, 0.8]))
+TRUE_THETAS = torch.tensor([[1.2, -0.4], [0.0, 0.5]])
+
+CONFIGS = {
+    "mdnn": {"components": 1, "hidden": [32, 32], "lr": 3e-3, "max_epochs": 200, "patience": 20},
+    "mdrff": {"components": 1, "features": 200, "lr": 1e-2, "max_epochs": 200, "patience": 20},
+    "flow": {"transforms": 2, "hidden": [32, 32], "lr": 3e-3, "max_epochs": 150, "patience": 20},
+}
+
+
+def _fit(name: str, theta: torch.Tensor, seed: int = 0):
+    torch.set_num_threads(1)
+    model = build("model", {"name": name, **CONFIGS[name]}, theta_dim=2, x_dim=3)
+    model.fit(theta, SIM.simulate(theta, seed=seed + 1), seed=seed, label="test")
+    return model
+
+
+def _moments(dist) -> tuple[torch.Tensor, torch.Tensor]:
+    if isinstance(dist, GaussianMixture):
+        return dist.mean, dist.covariance.diagonal().sqrt()
+    s = dist.sample((20000,))
+    return s.mean(0), s.std(0)
+
+
+def _assert_close_to(dist, mean, cov):
+    got_mean, got_std = _moments(dist)
+    std = cov.diagonal().sqrt()
+    assert ((got_mean - mean).abs() < 0.5 * std).all(), (got_mean, mean, std)
+    ratio = got_std / std
+    assert ((ratio > 0.75) & (ratio < 1.33)).all(), ratio
+
+
+@pytest.fixture(scope="module", params=list(CONFIGS))
+def fitted(request):
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 4000, seed=0)
+    return request.param, _fit(request.param, theta)
+
+
+def test_posterior_matches_the_analytic_posterior(fitted):
+    _, model = fitted
+    xs = SIM.simulate(TRUE_THETAS, seed=10)
+    for x in xs:
+        _assert_close_to(posterior([model.conditional(x)], PRIOR, PRIOR), *SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[None]))
+
+
+def test_state_dict_round_trip(fitted):
+    name, model = fitted
+    clone = build("model", {"name": name, **CONFIGS[name]}, theta_dim=2, x_dim=3)
+    clone.load_state_dict(model.state_dict())
+    x = SIM.simulate(TRUE_THETAS[:1], seed=11)[0]
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 50, seed=3)
+    torch.testing.assert_close(clone.conditional(x).log_prob(theta), model.conditional(x).log_prob(theta))
+
+
+def test_several_observations_with_a_trained_mdnn():
+    model = _fit("mdnn", gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 4000, seed=0))
+    xs = SIM.simulate(TRUE_THETAS[:1].expand(4, 2), seed=12)
+    post = posterior([model.conditional(x) for x in xs], PRIOR, PRIOR)
+    _assert_close_to(post, *SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, xs))
+
+
+def test_snpe_a_on_simulations_from_a_gaussian_proposal():
+    """Train on theta ~ p~ (narrower than the prior, off-centre); corrected, q gives the prior's posterior."""
+    prop_mean, prop_cov = torch.tensor([1.3, -0.3]), torch.diag(torch.tensor([0.6, 0.4]) ** 2)
+    proposal = GaussianMixture(torch.zeros(1), prop_mean[None], prop_cov[None])
+    model = _fit("mdnn", gaussian_draws(prop_mean, prop_cov, 4000, seed=5), seed=5)
+    x = SIM.simulate(TRUE_THETAS[:1], seed=13)[0]
+    post = posterior([model.conditional(x)], PRIOR, proposal)
+    assert isinstance(post, GaussianMixture)
+    _assert_close_to(post, *SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[None]))
+
+
+@pytest.mark.parametrize("kernel, dof", [("rbf", None), ("matern52", 5), ("matern32", 3), ("matern12", 1)])
+def test_rff_frequencies_follow_the_kernel_spectral_density(kernel, dof):
+    """Median of |w| * lengthscale equals the 0.75 quantile of the spectral density's marginal."""
+    from scipy import stats
+
+    from bayessim_exp.models.mdrff import spectral_frequencies
+
+    w = spectral_frequencies(3, 4096, kernel, lengthscale=2.0, quasi_random=True, seed=0).double()
+    expected = stats.norm.ppf(0.75) if dof is None else stats.t.ppf(0.75, dof)
+    median = (w.abs() * 2.0).median(0).values
+    assert ((median / expected - 1).abs() < 0.03).all(), median
+
+
+def test_mdrff_rejects_an_odd_number_of_features():
+    from bayessim_exp.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="features must be an even integer"):
+        build("model", {"name": "mdrff", "features": 201}, theta_dim=2, x_dim=3)
+
+
+@pytest.mark.parametrize("name", list(CONFIGS))
+def test_api_fit_save_load_round_trip(name, tmp_path):
+    from bayessim_exp import api
+
+    torch.set_num_threads(1)
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 300, seed=0)
+    cfg = {**CONFIGS[name], "max_epochs": 3}
+    fitted = api.fit_posterior_model(name, theta, SIM.simulate(theta, seed=1), prior=PRIOR, **cfg)
+    fitted.save(tmp_path / "model.pt")
+    loaded = api.FittedPosterior.load(tmp_path / "model.pt")
+    xs = SIM.simulate(TRUE_THETAS, seed=14)
+    probe = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 20, seed=4)
+    torch.testing.assert_close(loaded.posterior(xs[0]).log_prob(probe), fitted.posterior(xs[0]).log_prob(probe))
+    assert loaded.posterior(xs).sample((5,)).shape == (5, 2)  # several observations, any model
+
+
+@pytest.mark.parametrize("name", ["mdrff", "flow"])
+def test_nan_in_training_names_the_round_and_step(name):
+    from bayessim_exp.errors import TrainingError
+
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 300, seed=0)
+    x = SIM.simulate(theta, seed=1)
+    x[7, 1] = float("nan")
+    model = build("model", {"name": name, **CONFIGS[name], "max_epochs": 2}, theta_dim=2, x_dim=3)
+    with pytest.raises(TrainingError, match=r"round 3: (validation )?loss became nan at epoch 0, step \d+"):
+        model.fit(theta, x, seed=0, label="round 3")

@@ -27,6 +27,7 @@ GROUPS = ("task", "prior", "policy", "summarizer", "model", "rl", "sim", "real")
 _BUILTIN_MODULES = (
     "bayessim_exp.tasks.pendulum",
     "bayessim_exp.tasks.shadow_hand",
+    "bayessim_exp.tasks.anymal",
     "bayessim_exp.priors",
     "bayessim_exp.policies",
     "bayessim_exp.summarizers.basic",

@@ -59,7 +59,7 @@ class FileReal:
 
     def __init__(self, cfg: FileConfig, task: Task):
         if cfg.path in ("???", ""):
-            raise ConfigError("real=file needs real.path=<file.npz> (format: docs/real_data.md)")
+            raise ConfigError("real=file needs real.path=<file.npz> (format: README.md, 'Real data from a robot')")
         self.path = Path(cfg.path).expanduser()
         if not self.path.is_file():
             raise ConfigError(f"real.path={cfg.path!r}: no such file")

@@ -70,14 +70,20 @@ def mixture_nll(logits: torch.Tensor, means: torch.Tensor, U: torch.Tensor, thet
 
 
 class MDNN:
-    def __init__(self, cfg: MdnnConfig, theta_dim: int, x_dim: int):
+    """`embedding` (optional): a trainable module in front of the network, trained jointly
+    (learned summaries); it maps standardised summaries [N, x_dim] to features [N, E]."""
+
+    def __init__(self, cfg: MdnnConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
         act = _ACTIVATIONS[cfg.activation]
-        layers, width = [], x_dim
+        self.embedding = embedding if embedding is not None else nn.Identity()
+        with torch.no_grad():
+            width = self.embedding(torch.zeros(2, x_dim)).shape[-1]
+        layers = []
         for h in cfg.hidden:
             layers += [nn.Linear(width, h), act()]
             width = h
-        self.body = nn.Sequential(*layers)
+        self.body = nn.Sequential(self.embedding, *layers)
         self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
         self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm})
@@ -90,7 +96,7 @@ class MDNN:
         theta, x = theta.float(), x.float()
         if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
             torch.manual_seed(seed)
-            self.net.apply(lambda m: m.reset_parameters() if isinstance(m, nn.Linear) else None)
+            self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
             self.x_norm.fit(x)
             self.theta_norm.fit(theta)
         history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
@@ -118,5 +124,5 @@ class MDNN:
 
 
 @register("model", "mdnn", MdnnConfig)
-def mdnn(cfg: MdnnConfig, theta_dim: int, x_dim: int) -> MDNN:
-    return MDNN(cfg, theta_dim, x_dim)
+def mdnn(cfg: MdnnConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None) -> MDNN:
+    return MDNN(cfg, theta_dim, x_dim, embedding)

@@ -1,0 +1,101 @@
+"""The public Python API: fit a posterior model without Hydra, run the pipeline, read runs back.
+
+    from bayessim_exp import api
+    fitted = api.fit_posterior_model("mdnn", theta, x, prior=api.BoxUniform(low, high), components=3)
+    post = fitted.posterior(x_obs)          # [F] or several observations [n, F]
+    post.sample((1000,)); post.log_prob(theta)
+    results = api.run(["task=Pendulum", "debug=smoke"], out_dir="outputs/try")
+    run = api.load_run("outputs/try"); run.posterior(round_index=2)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import OmegaConf
+
+from . import registry
+from .inference.bayessim import condition
+from .models.mixture import TruncatedMixture
+from .priors import BoxUniform
+
+__all__ = ["BoxUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
+
+CONF_DIR = Path(__file__).parent / "conf"
+
+
+@dataclasses.dataclass
+class FittedPosterior:
+    name: str
+    model: Any
+    prior: Any
+    config: dict
+    history: dict
+    max_components: int = 50
+
+    def posterior(self, x_obs: torch.Tensor):
+        """The posterior given one summary [F] or several i.i.d. ones [n, F]."""
+        return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components)
+
+    def save(self, path: str | Path) -> None:
+        torch.save({"name": self.name, "config": self.config, "state": self.model.state_dict(),
+                    "theta_dim": self.model.theta_dim, "x_dim": self.model.x_dim, "history": self.history,
+                    "prior": None if self.prior is None else (self.prior.low, self.prior.high)}, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "FittedPosterior":
+        d = torch.load(path, weights_only=False)
+        model = registry.build("model", {"name": d["name"], **d["config"]}, theta_dim=d["theta_dim"], x_dim=d["x_dim"])
+        model.load_state_dict(d["state"])
+        prior = None if d["prior"] is None else BoxUniform(*d["prior"])
+        return cls(d["name"], model, prior, d["config"], d["history"])
+
+
+def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=None, seed: int = 0,
+                        **cfg: Any) -> FittedPosterior:
+    """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg as in conf/model/<name>.yaml."""
+    theta, x = torch.as_tensor(theta), torch.as_tensor(x)
+    model = registry.build("model", {"name": name, **cfg}, theta_dim=theta.shape[1], x_dim=x.shape[1])
+    history = model.fit(theta, x, seed=seed, label=name)
+    return FittedPosterior(name, model, prior, cfg, history)
+
+
+def compose(overrides: list[str] | None = None):
+    """The config the CLI would compose from these overrides."""
+    from hydra import compose as hydra_compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(CONF_DIR.resolve()), version_base="1.3"):
+        return hydra_compose(config_name="config", overrides=list(overrides or []))
+
+
+def run(overrides: list[str] | None = None, out_dir: str | Path | None = None) -> dict:
+    """Run the pipeline as `python -m bayessim_exp <overrides>` would; returns results.json's content."""
+    from .pipeline import run as run_pipeline
+
+    cfg = compose(overrides)
+    if out_dir is None:
+        out_dir = Path("outputs") / cfg.run_name / datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
+    return run_pipeline(cfg, out_dir)
+
+
+@dataclasses.dataclass
+class Run:
+    path: Path
+    results: dict
+    config: Any
+
+    def posterior(self, round_index: int | None = None) -> TruncatedMixture:
+        r = round_index or len(self.results["rounds"])
+        state = torch.load(self.path / f"round_{r:03d}" / "condition.pt", weights_only=False)["posterior"]
+        return TruncatedMixture.from_state_dict(state)
+
+
+def load_run(path: str | Path) -> Run:
+    path = Path(path)
+    results = json.loads((path / "results.json").read_text())
+    return Run(path, results, OmegaConf.load(path / "config.yaml"))

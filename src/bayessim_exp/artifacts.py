@@ -1,0 +1,83 @@
+"""Run directory layout and atomic writes: every finished stage survives a killed run.
+
+    <run dir>/config.yaml           the composed config (a resumed run must match it)
+    <run dir>/results.json          what sweeps and reports read (see DESIGN.md)
+    <run dir>/round_001/<stage>.pt  one artifact per finished stage
+    <run dir>/events.out.tfevents.* TensorBoard
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from .errors import ConfigError
+
+
+def _atomic_write(path: Path, write) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class RunDir:
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.path.mkdir(parents=True, exist_ok=True)
+
+    def stage_file(self, round_index: int, stage: str) -> Path:
+        return self.path / f"round_{round_index:03d}" / f"{stage}.pt"
+
+    def has(self, round_index: int, stage: str) -> bool:
+        return self.stage_file(round_index, stage).is_file()
+
+    def save(self, round_index: int, stage: str, obj: Any) -> None:
+        _atomic_write(self.stage_file(round_index, stage), lambda f: torch.save(obj, f))
+
+    def load(self, round_index: int, stage: str) -> Any:
+        return torch.load(self.stage_file(round_index, stage), weights_only=False)
+
+    def write_json(self, name: str, obj: Any) -> None:
+        _atomic_write(self.path / name, lambda f: f.write(json.dumps(obj, indent=2).encode()))
+
+    def read_json(self, name: str) -> Any:
+        p = self.path / name
+        return json.loads(p.read_text()) if p.is_file() else None
+
+    def bind_config(self, cfg: DictConfig) -> None:
+        """Record the config; a run dir that holds another config's stages is refused."""
+        text = OmegaConf.to_yaml(cfg, resolve=True)
+        stored = self.path / "config.yaml"
+        if stored.is_file():
+            if stored.read_text() != text:
+                old, new = OmegaConf.create(stored.read_text()), OmegaConf.create(text)
+                diff = sorted(_diff_keys(OmegaConf.to_container(old), OmegaConf.to_container(new)))
+                raise ConfigError(
+                    f"{self.path} holds a run with another config (differs at: {', '.join(diff[:8])}); "
+                    "resume with the same overrides or use a new run dir"
+                )
+            return
+        _atomic_write(stored, lambda f: f.write(text.encode()))
+
+
+def _diff_keys(a: Any, b: Any, prefix: str = "") -> set[str]:
+    if isinstance(a, dict) and isinstance(b, dict):
+        out: set[str] = set()
+        for k in set(a) | set(b):
+            out |= _diff_keys(a.get(k), b.get(k), f"{prefix}{k}.")
+        return out
+    return set() if a == b else {prefix.rstrip(".")}

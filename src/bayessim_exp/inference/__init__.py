@@ -1,0 +1,1 @@
+"""From simulations and real data to a parameter distribution (BayesSim; SimOpt later)."""

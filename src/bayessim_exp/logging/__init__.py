@@ -1,0 +1,1 @@
+"""TensorBoard output: posterior pair plots, losses, the composed config."""

@@ -1,0 +1,45 @@
+"""TensorBoard writer for a run: scalars, loss curves, posterior figures and the config text."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+class TensorBoardLogger:
+    def __init__(self, log_dir: str | Path):
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.writer = SummaryWriter(log_dir=str(log_dir))
+
+    def config(self, yaml_text: str) -> None:
+        # four-space indent renders as a code block in TensorBoard's text tab
+        self.writer.add_text("config", "\n".join("    " + line for line in yaml_text.splitlines()), 0)
+
+    def losses(self, round_index: int, history: dict, first_epoch: int) -> None:
+        for k, (train, val) in enumerate(zip(history["train"], history["val"])):
+            self.writer.add_scalar("loss/train", train, first_epoch + k)
+            self.writer.add_scalar("loss/val", val, first_epoch + k)
+        self.writer.add_scalar("loss/best_val_per_round", history["best_val"], round_index)
+
+    def scalars(self, round_index: int, values: dict[str, float]) -> None:
+        for tag, v in values.items():
+            if v is not None and np.isfinite(v):
+                self.writer.add_scalar(tag, v, round_index)
+
+    def posterior(self, round_index: int, posterior, prior, names: list[str], plot_names: list[str],
+                  true: np.ndarray | None, num_samples: int) -> None:
+        from .plots import pair_plot
+
+        idx = [names.index(n) for n in plot_names]
+        samples = posterior.sample((num_samples,)).numpy()[:, idx]
+        prior_samples = prior.sample((num_samples,)).numpy()[:, idx]
+        low, high = prior.low.numpy()[idx], prior.high.numpy()[idx]
+        fig = pair_plot(samples, plot_names, low, high, None if true is None else true[idx],
+                        f"posterior, round {round_index}", prior_samples)
+        self.writer.add_figure("posterior", fig, round_index)
+        self.writer.flush()
+
+    def close(self) -> None:
+        self.writer.close()

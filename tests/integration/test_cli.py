@@ -1,0 +1,85 @@
+"""The real CLI in a subprocess: errors before any simulation, and a --multirun sweep."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+
+def cli(*args, cwd):
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "bayessim_exp", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=300)
+    return proc, time.perf_counter() - t0
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["task=Nope"], ["Nope", "Available options in 'task'", "Pendulum"]),
+    (["model.components=abc"], ["model.components='abc'", "expected int"]),
+    (["+model.componentz=3"], ["model.componentz", "did you mean components", "allowed keys"]),
+    (["summarizer.steps=80"], ["steps=80 exceeds the trajectory horizon 50"]),
+    (["collect.horizon=ten"], ["collect.horizon", "'ten'"]),
+])
+def test_bad_config_fails_fast_with_the_allowed_values(tmp_path, args, expected):
+    proc, seconds = cli(*args, f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
+    assert proc.returncode != 0
+    for text in expected:
+        assert text in proc.stderr, proc.stderr
+    assert seconds < 10
+    assert not list(tmp_path.glob("run/round_*"))  # nothing was simulated
+
+
+def test_multirun_sweeps_seeds_into_named_run_dirs(tmp_path):
+    proc, _ = cli("--multirun", "debug=smoke", "seed=0,1", "iterations=1", f"hydra.sweep.dir={tmp_path}/sweep",
+                  cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    runs = sorted(p.name for p in (tmp_path / "sweep").iterdir() if p.is_dir() and p.name[0].isdigit())
+    assert runs == ["0_Pendulum_mdnn_start_random_seed0", "1_Pendulum_mdnn_start_random_seed1"]
+    for name in runs:
+        results = json.loads((tmp_path / "sweep" / name / "results.json").read_text())
+        assert results["seed"] == int(name[-1]) and len(results["rounds"]) == 1
+
+
+PLUGIN = '''
+import dataclasses
+from bayessim_exp.registry import register
+
+
+@dataclasses.dataclass
+class FinalStateConfig:
+    pass
+
+
+@register("summarizer", "final_state", FinalStateConfig)
+class FinalState:
+    def __init__(self, cfg):
+        pass
+
+    def check(self, horizon):
+        pass
+
+    def output_dim(self, state_dim, action_dim, horizon):
+        return state_dim
+
+    def __call__(self, traj):
+        return traj.states[:, -1]
+'''
+
+
+def test_a_component_registered_outside_the_package(tmp_path):
+    (tmp_path / "mylab").mkdir()
+    (tmp_path / "mylab" / "__init__.py").write_text("")
+    (tmp_path / "mylab" / "final.py").write_text(PLUGIN)
+    (tmp_path / "conf" / "summarizer").mkdir(parents=True)
+    (tmp_path / "conf" / "summarizer" / "final_state.yaml").write_text("# the last state\nname: final_state\n")
+    proc, _ = cli("plugins=[mylab.final]", f"hydra.searchpath=[file://{tmp_path}/conf]", "summarizer=final_state",
+                  "debug=smoke", "iterations=1", f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    results = json.loads((tmp_path / "run" / "results.json").read_text())
+    assert results["summarizer"] == "final_state" and results["run_name"] == "Pendulum_mdnn_final_state_random_seed0"

@@ -1,0 +1,70 @@
+"""MDNN recovers the closed-form posterior of a linear-Gaussian simulator."""
+
+import pytest
+import torch
+
+from bayessim_exp import api
+from bayessim_exp.errors import TrainingError
+
+
+def linear_gaussian(n, seed=0, noise=0.3):
+    g = torch.Generator().manual_seed(seed)
+    A = torch.tensor([[1.0, 0.5], [0.0, 1.0], [1.0, -1.0]])
+    theta = torch.randn(n, 2, generator=g)
+    x = theta @ A.T + noise * torch.randn(n, 3, generator=g)
+    return theta, x, A, noise
+
+
+@pytest.mark.parametrize("covariance", ["full", "diagonal"])
+def test_mdnn_matches_analytic_gaussian_posterior(covariance):
+    theta, x, A, noise = linear_gaussian(12_000)
+    fitted = api.fit_posterior_model("mdnn", theta, x, components=2, covariance=covariance, max_epochs=60,
+                                     patience=10, hidden=[64, 64])
+    x_obs = torch.tensor([0.5, 0.2, -0.4])
+    cov = torch.linalg.inv(torch.eye(2) + A.T @ A / noise**2)
+    mean = cov @ (A.T @ x_obs / noise**2)
+    post = fitted.posterior(x_obs)
+    # tolerances: a few percent of the prior scale (1.0) on the mean, 20 % on the variances
+    torch.testing.assert_close(post.mean.float(), mean, atol=0.05, rtol=0)
+    torch.testing.assert_close(post.covariance.diagonal().float(), cov.diagonal(), rtol=0.2, atol=0)
+    if covariance == "full":
+        torch.testing.assert_close(post.covariance[0, 1].float(), cov[0, 1], atol=0.01, rtol=0)
+
+
+def test_several_observations_combine_to_the_n_observation_posterior():
+    theta, x, A, noise = linear_gaussian(12_000, seed=1)
+    fitted = api.fit_posterior_model("mdnn", theta, x, components=1, max_epochs=60, patience=10, hidden=[64, 64])
+    # with a flat prior the product of per-observation posteriors is the n-observation posterior;
+    # here the prior is N(0, I): prod_i p(theta|x_i) / p(theta)^(n-1) -> compare after that division
+    xs = torch.tensor([[0.5, 0.2, -0.4], [0.3, 0.1, 0.0], [0.8, 0.4, -0.2]])
+    post = fitted.posterior(xs)
+    n = len(xs)
+    precision = torch.linalg.inv(post.covariance.float()) - (n - 1) * torch.eye(2)
+    cov_ratio = torch.linalg.inv(precision)
+    mean_ratio = cov_ratio @ (torch.linalg.inv(post.covariance.float()) @ post.mean.float())
+    cov = torch.linalg.inv(torch.eye(2) + n * A.T @ A / noise**2)
+    mean = cov @ (A.T @ xs.sum(0) / noise**2)
+    torch.testing.assert_close(mean_ratio, mean, atol=0.05, rtol=0)
+    torch.testing.assert_close(cov_ratio.diagonal(), cov.diagonal(), rtol=0.25, atol=0)
+
+
+def test_nan_in_training_names_the_round_and_step():
+    theta, x, _, _ = linear_gaussian(500)
+    fitted = api.fit_posterior_model("mdnn", theta, x, max_epochs=2)
+    bad = x.clone()
+    bad[7, 1] = float("nan")
+    with pytest.raises(TrainingError, match=r"round 3: (validation )?loss became nan at epoch 0, step \d+"):
+        fitted.model.fit(theta, bad, seed=0, label="round 3")
+
+
+def test_embedding_is_trained_jointly():
+    theta, x, _, _ = linear_gaussian(2000)
+    embedding = torch.nn.Linear(3, 4)
+    from bayessim_exp.models.mdnn import MDNN, MdnnConfig
+
+    model = MDNN(MdnnConfig(components=1, max_epochs=3, hidden=[16]), theta_dim=2, x_dim=3, embedding=embedding)
+    model.fit(theta, x, seed=0)
+    before = embedding.weight.detach().clone()
+    model.fit(theta, x, seed=1)  # fine-tuning moves the embedding with the rest of the network
+    assert not torch.allclose(before, embedding.weight)
+    assert any(k.startswith("body.0.") for k in model.state_dict()["net"])  # saved with the model

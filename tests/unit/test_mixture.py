@@ -1,0 +1,69 @@
+"""Gaussian-mixture algebra against closed forms; truncation to the prior box."""
+
+import math
+
+import pytest
+import torch
+
+from bayessim_exp.models.mixture import GaussianMixture, TruncatedMixture
+
+
+def gaussian(mean, cov):
+    return GaussianMixture(torch.zeros(1), torch.tensor([mean], dtype=torch.float64), torch.tensor([cov], dtype=torch.float64))
+
+
+def test_product_of_two_gaussians_is_the_analytic_gaussian():
+    A, B = torch.tensor([[1.0, 0.3], [0.3, 0.5]]), torch.tensor([[0.4, -0.1], [-0.1, 2.0]])
+    a, b = torch.tensor([0.2, -1.0]), torch.tensor([1.0, 0.5])
+    prod = gaussian(a.tolist(), A.tolist()).product(gaussian(b.tolist(), B.tolist()))
+    C = torch.linalg.inv(torch.linalg.inv(A) + torch.linalg.inv(B))
+    c = C @ (torch.linalg.solve(A, a) + torch.linalg.solve(B, b))
+    torch.testing.assert_close(prod.mean.float(), c, atol=1e-6, rtol=0)
+    torch.testing.assert_close(prod.covariance.float(), C, atol=1e-6, rtol=0)
+
+
+def test_mixture_product_weights_follow_overlap():
+    # two-component mixture times a narrow Gaussian at the second component: weight moves there
+    mix = GaussianMixture(torch.zeros(2), torch.tensor([[-2.0], [2.0]]), torch.ones(2, 1, 1))
+    prod = mix.product(gaussian([2.0], [[0.25]]))
+    w = prod.log_weights.exp()
+    expected = torch.tensor([math.exp(-0.5 * 16 / 1.25), 1.0], dtype=torch.float64)
+    torch.testing.assert_close(w, expected / expected.sum(), atol=1e-9, rtol=0)
+
+
+def test_moments_and_sampling_agree():
+    mix = GaussianMixture(torch.tensor([0.0, 1.0]), torch.tensor([[0.0, 0.0], [3.0, 1.0]]),
+                          torch.stack([torch.eye(2), 0.5 * torch.eye(2)]))
+    s = mix.sample((200_000,), generator=torch.Generator().manual_seed(0))
+    torch.testing.assert_close(s.mean(0), mix.mean, atol=0.02, rtol=0)
+    torch.testing.assert_close(torch.cov(s.T), mix.covariance, atol=0.03, rtol=0)
+
+
+def test_truncation_keeps_samples_inside_and_renormalises():
+    mix = GaussianMixture(torch.zeros(2), torch.tensor([[0.9, 0.0], [0.0, -0.8]]),
+                          torch.stack([0.3 * torch.eye(2), torch.tensor([[0.5, 0.2], [0.2, 0.4]])]))
+    low, high = torch.tensor([0.0, -1.0]), torch.tensor([1.0, 1.0])
+    trunc = TruncatedMixture(mix, low, high)
+    s = trunc.sample((50_000,))
+    assert ((s >= low) & (s <= high)).all()
+    # the density integrates to one over the box (midpoint rule on a fine grid)
+    n = 400
+    gx = low[0] + (torch.arange(n) + 0.5) * (high[0] - low[0]) / n
+    gy = low[1] + (torch.arange(n) + 0.5) * (high[1] - low[1]) / n
+    grid = torch.stack(torch.meshgrid(gx, gy, indexing="ij"), -1).reshape(-1, 2)
+    integral = trunc.log_prob(grid).exp().sum() * ((high - low).prod() / n**2)
+    assert integral.item() == pytest.approx(1.0, abs=0.01)
+    assert trunc.log_prob(torch.tensor([[1.5, 0.0]])).item() == -math.inf
+    # the truncated mean is the mean of the untruncated mixture restricted to the box
+    raw = mix.sample((400_000,), generator=torch.Generator().manual_seed(1))
+    inside = raw[((raw >= low) & (raw <= high)).all(1)]
+    mean, _ = trunc.moments(40_000)
+    torch.testing.assert_close(mean, inside.mean(0), atol=0.01, rtol=0)
+
+
+def test_state_dict_round_trip():
+    mix = GaussianMixture(torch.tensor([0.3, -0.2]), torch.randn(2, 3), torch.stack([torch.eye(3)] * 2))
+    trunc = TruncatedMixture(mix, -torch.ones(3), torch.ones(3))
+    back = TruncatedMixture.from_state_dict(trunc.state_dict())
+    x = torch.rand(5, 3) * 2 - 1
+    torch.testing.assert_close(back.log_prob(x), trunc.log_prob(x))

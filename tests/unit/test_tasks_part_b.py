@@ -17,7 +17,7 @@ from bayessim_exp.registry import build
 from bayessim_exp.sim.native import NativeSimulator
 
 CONF = os.path.join(os.path.dirname(__file__), "..", "..", "conf", "task")
-TASKS = ["ShadowHand", "ShadowHand_more", "Anymal"]
+TASKS = ["ShadowHand", "ShadowHand_more", "Anymal", "FrankaCabinet"]
 
 
 def _task(name: str):

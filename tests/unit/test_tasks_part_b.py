@@ -63,7 +63,7 @@ def test_wrong_target_names_closest(name):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", TASKS)
+@pytest.mark.parametrize("name", ["ShadowHand", "Anymal", "FrankaCabinet"])  # ShadowHand_more: same model
 def test_mjx_steps_match_native(name):
     """put_model works and 10 physics steps from a reset state agree with MuJoCo within 1e-4."""
     os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")

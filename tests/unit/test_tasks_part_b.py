@@ -51,6 +51,13 @@ def test_every_parameter_moves_the_trajectory(name):
     assert not dead, f"{name}: parameters that barely move the trajectory: {dead}"
 
 
+def test_first_observation_after_reset_has_site_positions():
+    task = _task("FrankaCabinet")
+    obs = NativeSimulator(task, 2).reset(np.repeat(task.real_values[None], 2, 0), None, np.random.default_rng(0))
+    to_handle = obs[:, task.obs_names.index("to_handle_x")]
+    assert (np.abs(to_handle) > 0.05).all()  # the gripper starts about 0.2 m in front of the handle
+
+
 @pytest.mark.parametrize("name", TASKS)
 def test_wrong_target_names_closest(name):
     cfg = OmegaConf.load(os.path.join(CONF, f"{name}.yaml"))

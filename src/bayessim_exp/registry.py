@@ -26,6 +26,12 @@ GROUPS = ("task", "prior", "policy", "summarizer", "model", "rl", "sim", "real")
 
 _BUILTIN_MODULES = (
     "bayessim_exp.tasks.pendulum",
+    "bayessim_exp.tasks.cartpole",
+    "bayessim_exp.tasks.ant",
+    "bayessim_exp.tasks.humanoid",
+    "bayessim_exp.tasks.ball_balance",
+    "bayessim_exp.tasks.ingenuity",
+    "bayessim_exp.tasks.quadcopter",
     "bayessim_exp.tasks.shadow_hand",
     "bayessim_exp.tasks.anymal",
     "bayessim_exp.tasks.franka_cabinet",

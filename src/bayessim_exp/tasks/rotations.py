@@ -1,11 +1,38 @@
-"""Batched quaternion algebra in MuJoCo's (w, x, y, z) order, written against an array namespace
-`xp` (numpy on CPU, jax.numpy under MJX) so task observations and rewards run on both backends."""
+"""Quaternion helpers for task observations, batched and written against an array namespace `xp`
+(numpy on CPU, jax.numpy under MJX).
+
+Quaternions are MuJoCo's (w, x, y, z), shape [..., 4]; vectors are [..., 3].
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
+
+
+def matrix(q: Any, xp: Any = np) -> Any:
+    """Rotation matrices [N, 3, 3] (body frame -> world) of unit quaternions."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    return xp.stack([xp.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def roll_yaw(q: Any, xp: Any = np) -> tuple[Any, Any]:
+    """Roll (about x) and yaw (about z) of the x-y-z Euler decomposition, in (-pi, pi]."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    roll = xp.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    yaw = xp.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, yaw
+
+
+def wrap(angle: Any, xp: Any = np) -> Any:
+    """Angles wrapped into (-pi, pi]."""
+    return xp.arctan2(xp.sin(angle), xp.cos(angle))
 
 
 def quat_conj(q: Any, xp: Any = np) -> Any:
@@ -24,14 +51,14 @@ def quat_mul(a: Any, b: Any, xp: Any = np) -> Any:
 
 
 def quat_rotate(q: Any, v: Any, xp: Any = np) -> Any:
-    """Rotate vectors v [..., 3] from the frame of q into the parent frame."""
+    """Rotate vectors v from the frame of q into the parent frame."""
     w, u = q[..., :1], q[..., 1:]
     t = 2.0 * xp.cross(u, v)
     return v + w * t + xp.cross(u, t)
 
 
 def quat_rotate_inverse(q: Any, v: Any, xp: Any = np) -> Any:
-    """Express parent-frame vectors v [..., 3] in the frame of q."""
+    """Express parent-frame vectors v in the frame of q."""
     return quat_rotate(quat_conj(q, xp), v, xp)
 
 

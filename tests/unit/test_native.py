@@ -77,3 +77,31 @@ def test_parameters_change_the_dynamics_per_environment(pendulum):
     assert not torch.allclose(traj.states[0], swapped.states[0])
     assert not torch.allclose(traj.states[1], swapped.states[1])
     torch.testing.assert_close(traj.states[2], swapped.states[2])  # same parameters, same trajectory
+
+
+MARKER = """
+<mujoco>
+  <worldbody><body name="bob" pos="0 0 1"><joint name="slide" type="slide" axis="1 0 0"/>
+    <geom type="sphere" size="0.05" mass="1"/><site name="tip" pos="0 0 0.5"/></body></worldbody>
+  <actuator><motor joint="slide" ctrlrange="-1 1"/></actuator>
+</mujoco>"""
+
+
+class Marker(Task):
+    name = "Marker"
+    obs_names = ("tip_z",)
+    data_fields = ("qpos", "qvel", "site_xpos")
+
+    @property
+    def model(self):
+        return mujoco.MjModel.from_xml_string(MARKER)
+
+    def observe(self, d, xp=np):
+        return d.site_xpos[:, 0, 2:3]
+
+
+def test_first_observation_after_reset_reads_derived_fields():
+    cfg = TaskConfig(parameters={"m": {"range": [0.5, 2.0], "targets": ["body_mass[bob]"]}}, real_params={"m": 1.0})
+    sim = NativeSimulator(Marker(cfg), 2)
+    obs = sim.reset(np.ones((2, 1)), None, np.random.default_rng(0))
+    np.testing.assert_allclose(obs[:, 0], 1.5)  # site_xpos computed at the reset state, not zeros

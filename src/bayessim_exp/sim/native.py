@@ -46,6 +46,8 @@ class NativeSimulator:
         self.batch = mjbatch.Batch(task.model, num_envs, nthread=self.cfg.nthread)
         derived = [f for f in task.data_fields if f not in ("qpos", "qvel", "act", "time")]
         self._stage = mujoco.mjtStage.mjSTAGE_VEL if derived else mujoco.mjtStage.mjSTAGE_NONE
+        for field in task.data_fields:  # outputs are copied out only after calls made once they are bound
+            self.batch.bind(field)
         self._diverged = np.zeros(num_envs, dtype=bool)
 
     # parameters ---------------------------------------------------------------------

@@ -10,6 +10,8 @@ import math
 
 import torch
 
+from .box_gaussian import ghk
+
 _LOG_2PI = math.log(2 * math.pi)
 
 
@@ -32,10 +34,13 @@ class GaussianMixture:
 
     def component_log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         """log N(theta; mean_k, cov_k) for every component: [..., K]."""
-        diff = theta.double()[..., None, :] - self.means  # [..., K, D]
-        z = torch.linalg.solve_triangular(self.scale_tril, diff.unsqueeze(-1), upper=False).squeeze(-1)
+        flat = theta.double().reshape(-1, self.dim)
+        # one triangular solve per component over all points: [K, D, N], never [N, K, D, D]
+        diff = flat.T.unsqueeze(0) - self.means.unsqueeze(-1)
+        z = torch.linalg.solve_triangular(self.scale_tril, diff, upper=False)
         half_logdet = torch.log(torch.diagonal(self.scale_tril, dim1=-2, dim2=-1)).sum(-1)
-        return -0.5 * (z**2).sum(-1) - half_logdet - 0.5 * self.dim * _LOG_2PI
+        out = -0.5 * (z**2).sum(1) - half_logdet[:, None] - 0.5 * self.dim * _LOG_2PI
+        return out.T.reshape(*theta.shape[:-1], self.num_components)
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         return torch.logsumexp(self.log_weights + self.component_log_prob(theta), -1)
@@ -100,24 +105,41 @@ class GaussianMixture:
 class TruncatedMixture:
     """A mixture restricted to the box [low, high] and renormalised.
 
-    The normaliser P(box) is estimated once by Monte Carlo with `num_mc` samples (relative error
-    about sqrt((1 - P) / (P num_mc))); sampling is exact, by rejection.
+    The normaliser P(box) is estimated once by Monte Carlo with `num_mc` draws, and sampling is
+    exact, by rejection. When fewer than `min_hits` of those draws land inside (a posterior in
+    many dimensions, or one far from the box), each component's box probability is estimated by
+    the GHK simulator instead (models/box_gaussian.py, `num_mc` // 50 weighted draws per
+    component) and draws come from GHK importance resampling: exact as the draws grow, and
+    repeatable.
     """
 
     def __init__(self, mixture: GaussianMixture, low: torch.Tensor, high: torch.Tensor,
-                 num_mc: int = 200_000, seed: int = 0):
+                 num_mc: int = 200_000, seed: int = 0, min_hits: int = 200):
         self.mixture = mixture
         self.low, self.high = low.double(), high.double()
         g = torch.Generator().manual_seed(seed)
-        inside = self._inside(mixture.sample((num_mc,), generator=g)).double().mean()
-        if inside <= 0:
+        hits = int(self._inside(mixture.sample((num_mc,), generator=g)).sum())
+        self.by_rejection = hits >= min_hits
+        if self.by_rejection:
+            self.component_log_mass = None
+            self._log_mass = math.log(hits / num_mc)
+        else:
+            self._ghk_draws = max(1000, num_mc // 50)
+            self.component_log_mass = torch.stack([
+                torch.logsumexp(ghk(m, L, self.low, self.high, self._ghk_draws, g)[1], 0) - math.log(self._ghk_draws)
+                for m, L in zip(mixture.means, mixture.scale_tril)
+            ])
+            self._log_mass = float(torch.logsumexp(mixture.log_weights + self.component_log_mass, 0))
+        if not math.isfinite(self._log_mass):
             raise ValueError(
                 "the posterior puts no measurable mass inside the prior's support; "
                 "the real data may not match the simulator or the model is badly fitted"
             )
-        self.mass_inside = float(inside)
-        self._log_mass = math.log(self.mass_inside)
         self._generator = torch.Generator().manual_seed(seed + 1)
+
+    @property
+    def log_mass_inside(self) -> float:
+        return self._log_mass
 
     def _inside(self, theta: torch.Tensor) -> torch.Tensor:
         return ((theta >= self.low) & (theta <= self.high)).all(-1)
@@ -134,14 +156,31 @@ class TruncatedMixture:
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         g = generator or self._generator
         n = math.prod(shape)
+        draws = self._rejection(n, g) if self.by_rejection else self._resampled(n, g)
+        return draws.reshape(*shape, self.dim)
+
+    def _rejection(self, n: int, g: torch.Generator) -> torch.Tensor:
         got, have = [], 0
-        batch = max(64, int(1.2 * n / self.mass_inside))
+        batch = max(64, int(1.2 * n / math.exp(self._log_mass)))
         while have < n:
             draw = self.mixture.sample((batch,), generator=g)
             draw = draw[self._inside(draw)]
             got.append(draw)
             have += len(draw)
-        return torch.cat(got)[:n].reshape(*shape, self.dim)
+        return torch.cat(got)[:n]
+
+    def _resampled(self, n: int, g: torch.Generator) -> torch.Tensor:
+        """Components by their truncated weight, then GHK draws resampled by their weights."""
+        weights = torch.softmax(self.mixture.log_weights + self.component_log_mass, 0)
+        counts = torch.bincount(torch.multinomial(weights, n, replacement=True, generator=g),
+                                minlength=self.mixture.num_components)
+        out = []
+        for k in torch.nonzero(counts).flatten().tolist():
+            pool = max(self._ghk_draws, 4 * int(counts[k]))
+            theta, log_w = ghk(self.mixture.means[k], self.mixture.scale_tril[k], self.low, self.high, pool, g)
+            pick = torch.multinomial(torch.softmax(log_w, 0), int(counts[k]), replacement=True, generator=g)
+            out.append(theta[pick])
+        return torch.cat(out)[torch.randperm(n, generator=g)]
 
     def moments(self, num: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
         """Monte Carlo mean and standard deviation (fixed seed, so repeatable)."""

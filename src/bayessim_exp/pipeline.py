@@ -84,7 +84,7 @@ class RunConfig:
     device: str = "cpu"
     plugins: list[str] = dataclasses.field(default_factory=list)
     run_name: str = ""
-    proposal: str = "gaussian"
+    proposal: str = "truncated"
     collect: CollectConfig = dataclasses.field(default_factory=CollectConfig)
     condition: ConditionConfig = dataclasses.field(default_factory=ConditionConfig)
     diagnostics: DiagnosticsConfig = dataclasses.field(default_factory=DiagnosticsConfig)

@@ -15,8 +15,8 @@ from bayessim_exp.sim.native import NativeSimulator
 pytestmark = pytest.mark.slow
 
 SMOKE = ["debug=smoke", "logging.progress=false"]
-# the smallest budget at which the acceptance bounds hold for seeds 0, 1, 2 (measured, see docs/benchmarks.md)
-SMALL_BUDGET = ["iterations=2", "collect.trajectories=6000", "collect.horizon=20", "model.batch_size=512"]
+# the default budget with 20-step instead of 50-step simulations (the start summary reads the first 20)
+SMALL_BUDGET = ["collect.horizon=20", "diagnostics.predictive_sims=0"]
 
 
 def test_killed_run_resumes_from_its_last_finished_stage(compose, tmp_path, monkeypatch):
@@ -116,3 +116,12 @@ def test_later_rounds_draw_from_the_previous_posterior_and_resume(compose, tmp_p
     assert (theta_2.std(0) < theta_1.std(0)).all()  # drawn from a posterior, narrower than the prior
     # SNPE-A trains each later round on that round's simulations only (one proposal per fit)
     assert results["rounds"][1]["train_set_size"] == results["rounds"][0]["train_set_size"]
+
+
+@pytest.mark.parametrize("model", ["mdnn", "mdrff", "flow"])
+def test_every_model_runs_sequential_rounds_from_the_previous_posterior(compose, tmp_path, model):
+    results = Pipeline(compose(SMOKE + [f"model={model}", "iterations=3"]), tmp_path).run()
+    default = compose([]).proposal
+    assert default != "prior"
+    assert [r["proposal"] for r in results["rounds"]] == ["prior", default, default]
+    assert all(r["log_prob_true_posterior"] is not None for r in results["rounds"])

@@ -59,6 +59,42 @@ class Standardizer(torch.nn.Module):
         return (data - self.shift) / self.scale
 
 
+class StandardizedDensityModel:
+    """Fitting and state shared by models with standardised inputs and targets.
+
+    Subclasses build `self.net` (a module holding every trainable part and the standardisers
+    `self.x_norm`, `self.theta_norm`) and define `_nll(theta_std, x_std)` and `conditional`.
+    """
+
+    cfg: TrainConfig
+    net: torch.nn.Module
+    x_norm: Standardizer
+    theta_norm: Standardizer
+    fitted: bool = False
+
+    def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
+        theta, x = theta.float(), x.float()
+        if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
+            torch.manual_seed(seed)
+            self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
+            self.x_norm.fit(x)
+            self.theta_norm.fit(theta)
+        history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
+                                seed=seed, label=label, on_epoch=on_epoch)
+        self.fitted = True
+        return history
+
+    def state_dict(self) -> dict:
+        return {"net": self.net.state_dict(), "fitted": self.fitted}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.net.load_state_dict(state["net"])
+        self.fitted = state["fitted"]
+
+
 def train_density(
     net: torch.nn.Module,
     nll: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],

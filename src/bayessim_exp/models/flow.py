@@ -19,7 +19,7 @@ from torch import nn
 
 from ..errors import ConfigError
 from ..registry import register
-from .base import Standardizer, TrainConfig, train_density
+from .base import StandardizedDensityModel, Standardizer, TrainConfig
 
 
 @dataclasses.dataclass
@@ -61,7 +61,7 @@ class FlowConditional:
         return lp.reshape(z.shape[:-1]) - self._log_jacobian
 
 
-class Flow:
+class Flow(StandardizedDensityModel):
     """`embedding` (optional, as for MDNN): a trainable module mapping standardised summaries
     [N, x_dim] to the flow's context [N, E], trained jointly."""
 
@@ -80,31 +80,12 @@ class Flow:
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         return -self.flow(self.embedding(x_std)).log_prob(theta_std)
 
-    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
-        theta, x = theta.float(), x.float()
-        if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
-            torch.manual_seed(seed)
-            self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
-            self.x_norm.fit(x)
-            self.theta_norm.fit(theta)
-        history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
-                                seed=seed, label=label, on_epoch=on_epoch)
-        self.fitted = True
-        return history
-
     @torch.no_grad()
     def conditional(self, x_obs: torch.Tensor) -> FlowConditional:
         """q(theta | x_obs) for one summary x_obs [F], with sample and log_prob in parameter units."""
         self.net.eval()
         dist = self.flow(self.embedding(self.x_norm(x_obs.float().reshape(1, -1)))[0])
         return FlowConditional(dist, self.theta_norm.shift, self.theta_norm.scale)
-
-    def state_dict(self) -> dict:
-        return {"net": self.net.state_dict(), "fitted": self.fitted}
-
-    def load_state_dict(self, state: dict) -> None:
-        self.net.load_state_dict(state["net"])
-        self.fitted = state["fitted"]
 
 
 @register("model", "flow", FlowConfig)

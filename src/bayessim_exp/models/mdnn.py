@@ -15,7 +15,7 @@ from torch import nn
 
 from ..errors import ConfigError
 from ..registry import register
-from .base import Standardizer, TrainConfig, train_density
+from .base import StandardizedDensityModel, Standardizer, TrainConfig
 from .mixture import GaussianMixture
 
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
@@ -69,7 +69,7 @@ def mixture_nll(logits: torch.Tensor, means: torch.Tensor, U: torch.Tensor, thet
     return -torch.logsumexp(torch.log_softmax(logits, -1) + comp, -1)
 
 
-class MDNN:
+class MDNN(StandardizedDensityModel):
     """`embedding` (optional): a trainable module in front of the network, trained jointly
     (learned summaries); it maps standardised summaries [N, x_dim] to features [N, E]."""
 
@@ -92,18 +92,6 @@ class MDNN:
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         return mixture_nll(*self.head(self.body(x_std)), theta_std)
 
-    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
-        theta, x = theta.float(), x.float()
-        if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
-            torch.manual_seed(seed)
-            self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
-            self.x_norm.fit(x)
-            self.theta_norm.fit(theta)
-        history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
-                                seed=seed, label=label, on_epoch=on_epoch)
-        self.fitted = True
-        return history
-
     @torch.no_grad()
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
         """q(theta | x_obs) in parameter units, for one summary x_obs [F]."""
@@ -114,13 +102,6 @@ class MDNN:
         covs = U_inv @ U_inv.transpose(-1, -2)
         std = GaussianMixture(logits[0], means[0], covs)
         return std.affine(self.theta_norm.shift, self.theta_norm.scale)
-
-    def state_dict(self) -> dict:
-        return {"net": self.net.state_dict(), "fitted": self.fitted}
-
-    def load_state_dict(self, state: dict) -> None:
-        self.net.load_state_dict(state["net"])
-        self.fitted = state["fitted"]
 
 
 @register("model", "mdnn", MdnnConfig)

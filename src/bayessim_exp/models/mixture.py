@@ -49,7 +49,11 @@ class GaussianMixture:
         n = math.prod(shape)
         comp = torch.multinomial(self.log_weights.exp(), n, replacement=True, generator=generator)
         eps = torch.randn(n, self.dim, dtype=torch.float64, generator=generator)
-        out = self.means[comp] + (self.scale_tril[comp] @ eps.unsqueeze(-1)).squeeze(-1)
+        out = torch.empty(n, self.dim, dtype=torch.float64)
+        # one matrix product per component, never a [n, D, D] stack of factors
+        for k in torch.unique(comp).tolist():
+            rows = comp == k
+            out[rows] = self.means[k] + eps[rows] @ self.scale_tril[k].T
         return out.reshape(*shape, self.dim)
 
     @property

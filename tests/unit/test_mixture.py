@@ -67,3 +67,14 @@ def test_state_dict_round_trip():
     back = TruncatedMixture.from_state_dict(trunc.state_dict())
     x = torch.rand(5, 3) * 2 - 1
     torch.testing.assert_close(back.log_prob(x), trunc.log_prob(x))
+
+
+def test_covariance_left_indefinite_by_rounding_is_repaired_with_a_small_jitter(caplog):
+    # rank-deficient by construction: cholesky fails without the jitter
+    v = torch.tensor([[1.0, 2.0, 3.0]], dtype=torch.float64)
+    cov = (v.T @ v).unsqueeze(0)
+    mix = GaussianMixture(torch.zeros(1), torch.zeros(1, 3), cov)
+    assert "not positive definite by rounding" in caplog.text
+    torch.testing.assert_close(mix.covs, cov, rtol=1e-3, atol=0)
+    with pytest.raises(ValueError, match="not finite"):
+        GaussianMixture(torch.zeros(1), torch.zeros(1, 3), torch.full((1, 3, 3), float("inf")))

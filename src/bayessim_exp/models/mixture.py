@@ -6,13 +6,37 @@ truncated to the prior's support (`TruncatedMixture`), renormalised rather than 
 
 from __future__ import annotations
 
+import logging
 import math
 
 import torch
 
 from .box_gaussian import ghk
 
+log = logging.getLogger(__name__)
+
 _LOG_2PI = math.log(2 * math.pi)
+# relative diagonal jitter tried, in turn, on covariances that rounding left not positive definite
+_JITTER = (1e-12, 1e-10, 1e-8, 1e-6, 1e-4)
+
+
+def _cholesky(covs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(covs, lower Cholesky factors), adding the smallest relative jitter that makes them factorise."""
+    if not torch.isfinite(covs).all():
+        raise ValueError("a mixture component's covariance is not finite")
+    factor, info = torch.linalg.cholesky_ex(covs)
+    if not info.any():
+        return covs, factor
+    failed = int((info != 0).sum())
+    scale = torch.diag_embed(torch.diagonal(covs, dim1=-2, dim2=-1).abs().clamp_min(torch.finfo(covs.dtype).tiny))
+    for eps in _JITTER:
+        fixed = covs + eps * scale
+        factor, info = torch.linalg.cholesky_ex(fixed)
+        if not info.any():
+            log.warning("%d mixture covariance(s) not positive definite by rounding; added %.0e of their diagonal",
+                        failed, eps)
+            return fixed, factor
+    raise ValueError("a mixture component's covariance is not positive definite, even with jitter")
 
 
 class GaussianMixture:
@@ -21,8 +45,7 @@ class GaussianMixture:
     def __init__(self, logits: torch.Tensor, means: torch.Tensor, covs: torch.Tensor):
         self.log_weights = torch.log_softmax(logits.double(), -1)
         self.means = means.double()
-        self.covs = 0.5 * (covs.double() + covs.double().transpose(-1, -2))
-        self.scale_tril = torch.linalg.cholesky(self.covs)
+        self.covs, self.scale_tril = _cholesky(0.5 * (covs.double() + covs.double().transpose(-1, -2)))
 
     @property
     def num_components(self) -> int:

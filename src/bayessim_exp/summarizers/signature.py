@@ -27,13 +27,14 @@ _BACKENDS = ("pysiglib", "torch")
 
 @dataclasses.dataclass
 class SignatureConfig:
-    depth: int = 3  # truncation level
+    depth: int = 2  # truncation level; the size grows as channels ** depth
     log_signature: bool = False  # coefficients of the log-signature on the Lyndon words instead
     time_augment: bool = True  # prepend the time channel; without it the signature ignores speed
     lead_lag: bool = False  # (lag, lead) copies of the state-action channels: adds quadratic variation
     basepoint: bool = False  # start the path at the origin, so the signature sees the initial state
     backend: str = "pysiglib"  # pysiglib | torch
     threads: int = 1  # pysiglib CPU threads (-1: all)
+    max_features: int = 50_000  # refuse, before simulating, summaries larger than this
 
     def validate(self) -> None:
         if self.depth < 1:
@@ -88,9 +89,15 @@ class SignatureSummarizer:
 
     def output_dim(self, state_dim: int, action_dim: int, horizon: int) -> int:
         dim = self.path_dim(state_dim, action_dim)
-        if self.cfg.log_signature:
-            return tensor_algebra.log_signature_length(dim, self.cfg.depth)
-        return tensor_algebra.signature_length(dim, self.cfg.depth)
+        length = (tensor_algebra.log_signature_length if self.cfg.log_signature else tensor_algebra.signature_length)
+        size = length(dim, self.cfg.depth)
+        if size > self.cfg.max_features:
+            raise ConfigError(
+                f"the depth-{self.cfg.depth} {'log-' if self.cfg.log_signature else ''}signature of this task's "
+                f"{dim}-channel path has {size} features (max_features={self.cfg.max_features}); lower "
+                "summarizer.depth, set summarizer.log_signature=true, or raise summarizer.max_features"
+            )
+        return size
 
     def __call__(self, traj: Trajectories) -> torch.Tensor:
         self.check(traj.horizon)

@@ -102,6 +102,10 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
         raise ConfigError("need iterations >= 1, collect.trajectories >= 20, collect.horizon >= 1, collect.chunk >= 1")
     if rc.condition.max_components < 1 or rc.logging.max_plot_params < 1 or rc.logging.plot_samples < 10:
         raise ConfigError("need condition.max_components >= 1, logging.max_plot_params >= 1, logging.plot_samples >= 10")
+    try:
+        torch.device(rc.device)
+    except RuntimeError as exc:
+        raise ConfigError(f"device={rc.device!r} is not a torch device: {exc}") from None
     if rc.proposal not in PROPOSALS:
         raise ConfigError(f"proposal={rc.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
     d = rc.diagnostics
@@ -231,14 +235,28 @@ class Pipeline:
 
     def proposal(self, r: int):
         """The distribution round r draws its parameters from (see PROPOSALS)."""
-        if r == 1 or self.rc.proposal == "prior":
+        if self.proposal_name(r) == "prior":
             return self.comp.prior
+        return self._proposals[r]
+
+    def proposal_name(self, r: int) -> str:
+        """The proposal round r really uses: `truncated` falls back to the prior when the previous
+        posterior's region is too small a share of the prior to sample (many parameters)."""
+        if r == 1 or self.rc.proposal == "prior":
+            return "prior"
         if r not in self._proposals:
             previous, seed = self.posterior(r - 1), stage_seed(self.rc.seed, r, "collect")
-            self._proposals[r] = {"posterior": lambda: previous,
-                                  "gaussian": lambda: moment_matched(previous, *self._box(), seed=seed),
-                                  "truncated": lambda: TruncatedPrior(self.comp.prior, previous, seed=seed)}[self.rc.proposal]()
-        return self._proposals[r]
+            if self.rc.proposal == "truncated":
+                try:
+                    self._proposals[r] = TruncatedPrior(self.comp.prior, previous, seed=seed)
+                except ValueError as exc:
+                    log.warning("round %d: %s; simulating from the prior instead", r, exc)
+                    self._proposals[r] = None
+            elif self.rc.proposal == "gaussian":
+                self._proposals[r] = moment_matched(previous, *self._box(), seed=seed)
+            else:
+                self._proposals[r] = previous
+        return "prior" if self._proposals[r] is None else self.rc.proposal
 
     def _box(self) -> tuple[torch.Tensor, torch.Tensor]:
         spec = self.comp.task.spec
@@ -328,7 +346,7 @@ class Pipeline:
                 "epochs": hist["epochs"],
                 "train_loss": hist["train"][-1],
                 "val_loss": hist["best_val"],
-                "proposal": "prior" if r == 1 else self.rc.proposal,
+                "proposal": self.proposal_name(r),
                 "coverage": fitted.get("coverage"),
                 **cond["metrics"],
                 "surrogate_real_return": None,

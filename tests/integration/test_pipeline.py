@@ -128,3 +128,13 @@ def test_every_model_runs_sequential_rounds_from_the_previous_posterior(compose,
     assert default != "prior"
     assert [r["proposal"] for r in results["rounds"]] == ["prior", default, default]
     assert all(r["log_prob_true_posterior"] is not None for r in results["rounds"])
+
+
+def test_truncation_that_cannot_be_sampled_falls_back_to_the_prior(compose, tmp_path, monkeypatch, caplog):
+    def refuse(*args, **kwargs):
+        raise ValueError("the previous posterior's 99.9% region holds 1e-30 of the prior's mass")
+
+    monkeypatch.setattr("bayessim_exp.pipeline.TruncatedPrior", refuse)
+    results = Pipeline(compose(SMOKE + ["proposal=truncated"]), tmp_path).run()
+    assert [r["proposal"] for r in results["rounds"]] == ["prior", "prior"]
+    assert "round 2: the previous posterior's 99.9% region" in caplog.text

@@ -2,11 +2,13 @@
 
 import math
 
+import pytest
 import torch
 
 from bayessim_exp.models.correction import posterior
 from bayessim_exp.models.importance import ImportancePosterior
 from bayessim_exp.models.mixture import GaussianMixture, TruncatedMixture
+from bayessim_exp.models.proposals import TruncatedPrior
 from bayessim_exp.priors import BoxUniform, GaussianPrior
 from linear_gaussian import LinearGaussian
 
@@ -105,7 +107,6 @@ def test_moment_matched_proposal_keeps_the_correction_in_closed_form():
 
 
 def test_truncated_prior_proposal_needs_no_correction():
-    from bayessim_exp.models.proposals import TruncatedPrior
     from bayessim_exp.models.restricted import Restricted
 
     low, high = torch.tensor([-3.0, -3.0], dtype=torch.float64), torch.tensor([3.0, 3.0], dtype=torch.float64)
@@ -126,3 +127,12 @@ def _box_grid_mean(log_density, low, high, n=401):
     grid = torch.stack(torch.meshgrid(g0, g1, indexing="ij"), -1).reshape(-1, 2)
     w = torch.softmax(log_density(grid), 0)
     return (w[:, None] * grid).sum(0)
+
+
+def test_truncation_to_a_region_with_almost_no_prior_mass_is_refused():
+    # 30 parameters, posterior std 1/20 of the prior's width: its region is ~1e-30 of the prior
+    d = 30
+    prior = BoxUniform(torch.zeros(d, dtype=torch.float64), torch.ones(d, dtype=torch.float64))
+    narrow = GaussianMixture(torch.zeros(1), torch.full((1, d), 0.5), (0.05**2) * torch.eye(d)[None])
+    with pytest.raises(ValueError, match="too little to sample by rejection"):
+        TruncatedPrior(prior, narrow)

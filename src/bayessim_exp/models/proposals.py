@@ -18,7 +18,8 @@ from .mixture import GaussianMixture, TruncatedMixture
 class TruncatedPrior:
     """prior(theta) * 1[posterior.log_prob(theta) >= threshold] / mass, sampled by rejection from the prior."""
 
-    def __init__(self, prior, posterior, hpd_mass: float = 0.999, num: int = 20_000, seed: int = 0):
+    def __init__(self, prior, posterior, hpd_mass: float = 0.999, num: int = 20_000, seed: int = 0,
+                 min_accept: float = 1e-3):
         if not 0.0 < hpd_mass < 1.0:
             raise ValueError(f"hpd_mass must be in (0, 1), got {hpd_mass}")
         self.prior, self.posterior = prior, posterior
@@ -28,8 +29,11 @@ class TruncatedPrior:
             lp = posterior.log_prob(posterior.sample((num,)).double())
             self.threshold = float(torch.quantile(lp[torch.isfinite(lp)], 1.0 - hpd_mass))
             accept = self._in_region(prior.sample((num,)).double()).double().mean()
-        if accept <= 0:
-            raise ValueError("the previous posterior's high-density region has no prior mass; cannot truncate")
+        if accept < min_accept:
+            # in many dimensions a concentrated posterior's region holds a vanishing share of the
+            # prior: rejection from the prior would never finish
+            raise ValueError(f"the previous posterior's {hpd_mass:.1%} region holds {float(accept):.2g} of the prior's "
+                             f"mass (< {min_accept:g}): too little to sample by rejection")
         self.accept_rate = float(accept)
 
     def _in_region(self, theta: torch.Tensor) -> torch.Tensor:

@@ -12,6 +12,7 @@ import math
 import torch
 
 from .box_gaussian import ghk
+from .rejection import sample_by_rejection
 
 log = logging.getLogger(__name__)
 
@@ -183,18 +184,12 @@ class TruncatedMixture:
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         g = generator or self._generator
         n = math.prod(shape)
-        draws = self._rejection(n, g) if self.by_rejection else self._resampled(n, g)
+        if self.by_rejection:
+            draws = sample_by_rejection(lambda b: self.mixture.sample((b,), generator=g), self._inside, n,
+                                        math.exp(self._log_mass))
+        else:
+            draws = self._resampled(n, g)
         return draws.reshape(*shape, self.dim)
-
-    def _rejection(self, n: int, g: torch.Generator) -> torch.Tensor:
-        got, have = [], 0
-        batch = max(64, int(1.2 * n / math.exp(self._log_mass)))
-        while have < n:
-            draw = self.mixture.sample((batch,), generator=g)
-            draw = draw[self._inside(draw)]
-            got.append(draw)
-            have += len(draw)
-        return torch.cat(got)[:n]
 
     def _resampled(self, n: int, g: torch.Generator) -> torch.Tensor:
         """Components by their truncated weight, then GHK draws resampled by their weights."""

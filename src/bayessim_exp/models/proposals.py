@@ -13,6 +13,7 @@ import math
 import torch
 
 from .mixture import GaussianMixture, TruncatedMixture
+from .rejection import sample_by_rejection
 
 
 class TruncatedPrior:
@@ -46,14 +47,8 @@ class TruncatedPrior:
 
     def sample(self, shape: tuple[int, ...] = (1,)) -> torch.Tensor:
         n = math.prod(shape)
-        got, have = [], 0
-        batch = max(256, int(1.2 * n / self.accept_rate))
-        while have < n:
-            draw = self.prior.sample((batch,)).double()
-            draw = draw[self._in_region(draw)]
-            got.append(draw)
-            have += len(draw)
-        return torch.cat(got)[:n].reshape(*shape, -1)
+        draws = sample_by_rejection(lambda b: self.prior.sample((b,)).double(), self._in_region, n, self.accept_rate)
+        return draws.reshape(*shape, -1)
 
 
 def moment_matched(posterior, low: torch.Tensor | None = None, high: torch.Tensor | None = None,

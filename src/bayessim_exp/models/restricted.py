@@ -6,6 +6,8 @@ import math
 
 import torch
 
+from .rejection import sample_by_rejection
+
 
 class Restricted:
     """dist restricted to [low, high]; the mass inside is a Monte Carlo estimate from `num_mc` draws,
@@ -37,14 +39,8 @@ class Restricted:
     @torch.no_grad()
     def sample(self, shape: tuple[int, ...] = (1,)) -> torch.Tensor:
         n = math.prod(shape)
-        got, have = [], 0
-        batch = max(64, int(1.2 * n / self.mass_inside))
-        while have < n:
-            draw = self.dist.sample((batch,)).double()
-            draw = draw[self._inside(draw)]
-            got.append(draw)
-            have += len(draw)
-        return torch.cat(got)[:n].reshape(*shape, self.dim)
+        draws = sample_by_rejection(lambda b: self.dist.sample((b,)).double(), self._inside, n, self.mass_inside)
+        return draws.reshape(*shape, self.dim)
 
     def moments(self, num: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
         """Monte Carlo mean and standard deviation (fixed seed, so repeatable)."""

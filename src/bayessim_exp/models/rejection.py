@@ -1,0 +1,20 @@
+"""Exact sampling from a distribution restricted to a region, by rejection."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import torch
+
+
+def sample_by_rejection(draw: Callable[[int], torch.Tensor], keep: Callable[[torch.Tensor], torch.Tensor],
+                        n: int, acceptance: float) -> torch.Tensor:
+    """n draws [n, D] of draw(batch) that satisfy keep; batches sized from the known acceptance rate."""
+    got, have = [], 0
+    batch = max(256, int(1.2 * n / acceptance))
+    while have < n:
+        candidates = draw(batch)
+        candidates = candidates[keep(candidates)]
+        got.append(candidates)
+        have += len(candidates)
+    return torch.cat(got)[:n]

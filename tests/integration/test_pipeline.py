@@ -138,3 +138,26 @@ def test_truncation_that_cannot_be_sampled_falls_back_to_the_prior(compose, tmp_
     results = Pipeline(compose(SMOKE + ["proposal=truncated"]), tmp_path).run()
     assert [r["proposal"] for r in results["rounds"]] == ["prior", "prior"]
     assert "round 2: the previous posterior's 99.9% region" in caplog.text
+
+
+def test_training_that_turns_nan_stops_naming_the_round_and_keeps_earlier_posteriors(compose, tmp_path, monkeypatch):
+    from bayessim_exp.errors import TrainingError
+    from bayessim_exp.models import base
+
+    cfg = compose(SMOKE)
+    Pipeline(cfg, tmp_path).run(stop_after=(1, "condition"))
+    posterior_1 = tmp_path / "round_001" / "condition.pt"
+    before = (posterior_1.read_bytes(), posterior_1.stat().st_mtime_ns)
+
+    original = base.train_density
+
+    def poisoned(net, nll, theta, x, *args, **kwargs):
+        x = x.clone()
+        x[:, 0] = float("nan")
+        return original(net, nll, theta, x, *args, **kwargs)
+
+    monkeypatch.setattr(base, "train_density", poisoned)
+    with pytest.raises(TrainingError, match=r"round 2: loss became nan at epoch 0, step 1"):
+        Pipeline(cfg, tmp_path).run()
+    assert (posterior_1.read_bytes(), posterior_1.stat().st_mtime_ns) == before
+    assert not (tmp_path / "round_002" / "fit.pt").exists()

@@ -10,12 +10,12 @@ from omegaconf import DictConfig
 def _app(cfg: DictConfig) -> None:
     from hydra.core.hydra_config import HydraConfig
 
-    from .errors import ConfigError, DataError, TrainingError
+    from .errors import ConfigError, DataError, PosteriorError, TrainingError
     from .pipeline import run
 
     try:
         results = run(cfg, HydraConfig.get().runtime.output_dir)
-    except (ConfigError, DataError, TrainingError) as exc:
+    except (ConfigError, DataError, PosteriorError, TrainingError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
     last = results["rounds"][-1]

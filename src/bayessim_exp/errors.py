@@ -11,3 +11,7 @@ class DataError(ValueError):
 
 class TrainingError(RuntimeError):
     """Training diverged (NaN/inf); the message names the round and step."""
+
+
+class PosteriorError(RuntimeError):
+    """The posterior cannot be formed or sampled (e.g. no mass inside the prior's support)."""

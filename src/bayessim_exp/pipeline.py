@@ -23,7 +23,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from . import registry
 from .artifacts import RunDir
-from .errors import ConfigError
+from .errors import ConfigError, PosteriorError
 from .diagnostics.coverage import expected_coverage
 from .diagnostics.predictive import predictive_distances
 from .inference.bayessim import condition
@@ -284,8 +284,11 @@ class Pipeline:
         return {"x": x, "new": len(x_new), "traj": traj.state_dict()}
 
     def condition(self, r: int, model, x_real: torch.Tensor):
-        post = condition(model, x_real, self.comp.prior, self.rc.condition.max_components, proposal=self.proposal(r),
-                         seed=stage_seed(self.rc.seed, r, "condition"))
+        try:
+            post = condition(model, x_real, self.comp.prior, self.rc.condition.max_components,
+                             proposal=self.proposal(r), seed=stage_seed(self.rc.seed, r, "condition"))
+        except ValueError as exc:
+            raise PosteriorError(f"round {r}: {exc}") from exc
         self._posteriors[r] = post
         return post
 

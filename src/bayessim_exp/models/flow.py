@@ -36,6 +36,10 @@ class FlowConfig(TrainConfig):
             raise ConfigError(f"hidden must be a non-empty list of positive layer sizes, got {self.hidden}")
 
 
+def _chunks(n: int, size: int) -> list[int]:
+    return [min(size, n - start) for start in range(0, n, size)]
+
+
 class FlowConditional:
     """q(theta | x_obs) in parameter units: the flow on standardised theta, mapped back."""
 
@@ -50,7 +54,8 @@ class FlowConditional:
     @torch.no_grad()
     def sample(self, shape: tuple[int, ...] = (1,)) -> torch.Tensor:
         n = math.prod(shape)
-        z = self.dist.sample((n,)).double()
+        # the autoregressive inverse runs the network once per dimension: bound its memory by chunks
+        z = torch.cat([self.dist.sample((k,)) for k in _chunks(n, 4096)]).double()
         return (self.shift + self.scale * z).reshape(*shape, self.dim)
 
     @torch.no_grad()

@@ -13,15 +13,18 @@ class Restricted:
     """dist restricted to [low, high]; the mass inside is a Monte Carlo estimate from `num_mc` draws,
     sampling is exact by rejection."""
 
-    def __init__(self, dist, low: torch.Tensor, high: torch.Tensor, num_mc: int = 50_000, seed: int = 0):
+    def __init__(self, dist, low: torch.Tensor, high: torch.Tensor, num_mc: int = 50_000, seed: int = 0,
+                 min_hits: int = 50):
         self.dist, self.low, self.high = dist, low.double(), high.double()
         with torch.random.fork_rng():
             torch.manual_seed(seed)
-            inside = self._inside(dist.sample((num_mc,)).double()).double().mean()
-        if inside <= 0:
-            raise ValueError("the posterior puts no measurable mass inside the prior's support; "
-                             "the real data may not match the simulator or the model is badly fitted")
-        self.mass_inside = float(inside)
+            hits = int(self._inside(dist.sample((num_mc,)).double()).sum())
+        if hits < min_hits:
+            # rejection would need about num_mc / hits draws per sample: refuse rather than exhaust memory
+            raise ValueError(f"the posterior puts {hits} of {num_mc} draws inside the prior's support (fewer than "
+                             f"{min_hits}); the model is badly fitted or, for a flow with many parameters, use "
+                             "model=mdnn, whose mixtures are truncated in closed form")
+        self.mass_inside = hits / num_mc
         self._log_mass = math.log(self.mass_inside)
 
     def _inside(self, theta: torch.Tensor) -> torch.Tensor:

@@ -54,10 +54,6 @@ class RunDir:
     def write_json(self, name: str, obj: Any) -> None:
         _atomic_write(self.path / name, lambda f: f.write(json.dumps(obj, indent=2).encode()))
 
-    def read_json(self, name: str) -> Any:
-        p = self.path / name
-        return json.loads(p.read_text()) if p.is_file() else None
-
     def bind_config(self, cfg: DictConfig) -> None:
         """Record the config; a run dir that holds another config's stages is refused."""
         text = OmegaConf.to_yaml(cfg, resolve=True)

@@ -80,7 +80,6 @@ class Flow(StandardizedDensityModel):
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
         self.net = nn.ModuleDict({"embedding": self.embedding, "flow": self.flow,
                                   "x_norm": self.x_norm, "theta_norm": self.theta_norm})
-        self.fitted = False
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         return -self.flow(self.embedding(x_std)).log_prob(theta_std)

@@ -87,7 +87,6 @@ class MDNN(StandardizedDensityModel):
         self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
         self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm})
-        self.fitted = False
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         return mixture_nll(*self.head(self.body(x_std)), theta_std)

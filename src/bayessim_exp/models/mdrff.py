@@ -99,7 +99,6 @@ class MDRFF(MDNN):
         self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
         self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm})
-        self.fitted = False
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
         if not self.fitted:  # frequencies are drawn once, with the first fit's seed, and then kept

@@ -155,9 +155,6 @@ class ParamSpec:
                         arr[idx] = arr[idx] + (t.coef * v).reshape(bshape)
         return out
 
-    def nominal_values(self, model: mujoco.MjModel) -> dict[str, np.ndarray]:
-        return {f: _nominal(model, f) for f in self.fields}
-
 
 def _nominal(model: mujoco.MjModel, field: str) -> np.ndarray:
     if field.startswith("opt."):

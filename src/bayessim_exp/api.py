@@ -51,7 +51,7 @@ class FittedPosterior:
     @classmethod
     def load(cls, path: str | Path) -> "FittedPosterior":
         d = torch.load(path, weights_only=False)
-        model = registry.build("model", {**registry.option_defaults("model", d["name"]), **d["config"], "name": d["name"]},
+        model = registry.build("model", {**d["config"], "name": d["name"]},
                                theta_dim=d["theta_dim"], x_dim=d["x_dim"])
         model.load_state_dict(d["state"])
         return cls(d["name"], model, d["prior"], d["config"], d["history"])
@@ -62,7 +62,7 @@ def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=N
     """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg overrides the defaults in
     conf/model/<name>.yaml."""
     theta, x = torch.as_tensor(theta), torch.as_tensor(x)
-    model = registry.build("model", {**registry.option_defaults("model", name), **cfg, "name": name},
+    model = registry.build("model", {**cfg, "name": name},
                            theta_dim=theta.shape[1], x_dim=x.shape[1])
     history = model.fit(theta, x, seed=seed, label=name)
     return FittedPosterior(name, model, prior, cfg, history)

@@ -73,7 +73,10 @@ def test_summarize_drops_and_counts_diverged_simulations(tmp_path, monkeypatch):
 
 def test_parameters_change_the_dynamics_per_environment(pendulum):
     params = np.array([[1.0, 0.5], [2.0, 0.5], [1.0, 1.0]])
-    run = lambda p: native(pendulum, 3).rollout(p, RandomPolicy(1, 0), 30, seed=0)
+
+    def run(p):
+        return native(pendulum, 3).rollout(p, RandomPolicy(1, 0), 30, seed=0)
+
     traj, swapped = run(params), run(params[[1, 0, 2]])
     # equal seeds give each slot the same initial state and actions in both runs: only parameters differ
     assert not torch.allclose(traj.states[0], swapped.states[0])

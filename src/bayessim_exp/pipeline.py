@@ -24,10 +24,12 @@ from omegaconf.errors import OmegaConfBaseException
 from . import registry
 from .artifacts import RunDir
 from .errors import ConfigError, PosteriorError
-from .diagnostics.coverage import expected_coverage
+from .diagnostics.coverage import expected_coverage, held_out_gain
+from .diagnostics.guard import check_posterior
 from .diagnostics.predictive import predictive_distances
 from .inference.bayessim import condition
 from .models.mixture import TruncatedMixture
+from .models.probit_space import ProbitPosterior, ProbitTransform, standard_normal_prior
 from .models.proposals import TruncatedPrior, moment_matched
 from .sim.trajectories import Trajectories
 
@@ -85,6 +87,7 @@ class RunConfig:
     plugins: list[str] = dataclasses.field(default_factory=list)
     run_name: str = ""
     proposal: str = "truncated"
+    parameter_space: str = "box"  # box | probit: what the model is fitted in (models/probit_space.py)
     collect: CollectConfig = dataclasses.field(default_factory=CollectConfig)
     condition: ConditionConfig = dataclasses.field(default_factory=ConditionConfig)
     diagnostics: DiagnosticsConfig = dataclasses.field(default_factory=DiagnosticsConfig)
@@ -106,6 +109,8 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
         torch.device(rc.device)
     except RuntimeError as exc:
         raise ConfigError(f"device={rc.device!r} is not a torch device: {exc}") from None
+    if rc.parameter_space not in ("box", "probit"):
+        raise ConfigError(f"parameter_space={rc.parameter_space!r} not allowed; allowed: box, probit")
     if rc.proposal not in PROPOSALS:
         raise ConfigError(f"proposal={rc.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
     d = rc.diagnostics
@@ -182,6 +187,7 @@ class Pipeline:
         self._tb = None
         self._posteriors: dict[int, Any] = {}
         self._proposals: dict[int, Any] = {}
+        self.probit = ProbitTransform(self.comp.prior) if self.rc.parameter_space == "probit" else None
 
     @property
     def tb(self):
@@ -216,16 +222,27 @@ class Pipeline:
     def fit(self, r: int, model) -> dict:
         first = r if self.rc.proposal in _SINGLE_ROUND_PROPOSALS else 1
         data = [self._split(self.run_dir.load(k, "summarize")) for k in range(first, r + 1)]
-        theta = torch.cat([d[0] for d in data])
+        theta = self._fitted_space(torch.cat([d[0] for d in data]))
         x = torch.cat([d[1] for d in data])
         if r > 1 and self.rc.ftune:
             model.load_state_dict(self.run_dir.load(r - 1, "fit")["model"])
         history = model.fit(theta, x, seed=stage_seed(self.rc.seed, r, "fit"), label=f"round {r}")
-        theta_val, x_val = data[-1][2], data[-1][3]
+        theta_val, x_val = self._fitted_space(data[-1][2]), data[-1][3]
         d = self.rc.diagnostics
         coverage = None if len(theta_val) == 0 else expected_coverage(
             model, theta_val, x_val, d.levels, d.coverage_samples, seed=stage_seed(self.rc.seed, r, "fit"))
-        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage}
+        gain = None if len(theta_val) == 0 or r > 1 else held_out_gain(model, theta_val, x_val, self._fitted_prior())
+        guard = check_posterior(gain, coverage and coverage["hpd"])
+        for warning in guard.warnings:
+            log.warning("round %d: %s", r, warning)
+        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
+                "held_out_gain": gain, "guard": guard.to_dict()}
+
+    def _fitted_space(self, theta: torch.Tensor) -> torch.Tensor:
+        return theta if self.probit is None else self.probit.to_probit(theta).float()
+
+    def _fitted_prior(self):
+        return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
         """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
@@ -252,6 +269,8 @@ class Pipeline:
                 except ValueError as exc:
                     log.warning("round %d: %s; simulating from the prior instead", r, exc)
                     self._proposals[r] = None
+            elif self.rc.proposal == "gaussian" and isinstance(previous, ProbitPosterior):
+                self._proposals[r] = ProbitPosterior(moment_matched(previous.inner, seed=seed), self.probit)
             elif self.rc.proposal == "gaussian":
                 self._proposals[r] = moment_matched(previous, *self._box(), seed=seed)
             else:
@@ -286,7 +305,7 @@ class Pipeline:
     def condition(self, r: int, model, x_real: torch.Tensor):
         try:
             post = condition(model, x_real, self.comp.prior, self.rc.condition.max_components,
-                             proposal=self.proposal(r), seed=stage_seed(self.rc.seed, r, "condition"))
+                             proposal=self.proposal(r), seed=stage_seed(self.rc.seed, r, "condition"), probit=self.probit)
         except ValueError as exc:
             raise PosteriorError(f"round {r}: {exc}") from exc
         self._posteriors[r] = post
@@ -351,6 +370,8 @@ class Pipeline:
                 "val_loss": hist["best_val"],
                 "proposal": self.proposal_name(r),
                 "coverage": fitted.get("coverage"),
+                "held_out_gain": fitted.get("held_out_gain"),
+                "guard": fitted.get("guard"),
                 **cond["metrics"],
                 "surrogate_real_return": None,
                 "seconds": seconds,
@@ -360,6 +381,8 @@ class Pipeline:
             self.tb.scalars(r, {"posterior/log_prob_true": record["log_prob_true_posterior"],
                                 "posterior/log_prob_gain_over_prior": record["log_prob_gain"],
                                 "sim/diverged": record["diverged"],
+                                "guard/warnings": len((record["guard"] or {}).get("warnings", [])),
+                                **({} if record["held_out_gain"] is None else {"held_out/gain": record["held_out_gain"]}),
                                 **{f"predictive_distance/{k}": v for k, v in (record["predictive_distance"] or {}).items()},
                                 **{f"coverage/{kind}_{level}": value
                                    for kind, levels in (record["coverage"] or {}).items() for level, value in levels.items()}})

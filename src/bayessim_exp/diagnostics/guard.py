@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 
-# coverage further than this below (overconfident) or above (underconfident) the nominal level is flagged
+# coverage further than this below (overconfident) or above (underconfident) the nominal level L is
+# flagged; never more than half the nominal miscoverage (1 - L) / 2, so 90 % regions must cover 85-95 %
 COVERAGE_TOLERANCE = 0.1
 
 
@@ -40,12 +41,13 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None,
             "information (corrdiff, waypoints), more simulations, or model=linear as a floor")
     for level, value in (coverage or {}).items():
         nominal = float(level)
-        if value < nominal - tolerance:
+        tol = min(tolerance, (1 - nominal) / 2)
+        if value < nominal - tol:
             warnings.append(
                 f"overconfident: {value:.0%} of held-out true parameters fall in the {nominal:.0%} credible region: "
                 "the posterior is too narrow. Try stronger regularisation (weight_decay, smaller hidden layers), "
-                "model.covariance=diagonal, more simulations or more patience-free early stopping (val_fraction)")
-        elif value > nominal + tolerance:
+                "model.covariance=diagonal, more simulations, or the probit parameter space")
+        elif value > nominal + tol:
             warnings.append(
                 f"underconfident: {value:.0%} of held-out true parameters fall in the {nominal:.0%} credible region: "
                 "the posterior is wider than the data allow. Try more components, a larger network or more epochs "

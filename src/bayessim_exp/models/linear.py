@@ -16,6 +16,7 @@ import torch
 from ..errors import ConfigError, TrainingError
 from ..registry import register
 from .mixture import GaussianMixture
+from .projection import RidgeSystem
 
 
 @dataclasses.dataclass
@@ -28,14 +29,6 @@ class LinearConfig:
             raise ConfigError(f"penalties must be a non-empty list of values >= 0, got {self.penalties}")
         if not 0.0 < self.val_fraction < 0.5:
             raise ConfigError(f"val_fraction must be in (0, 0.5), got {self.val_fraction}")
-
-
-def _ridge(z: torch.Tensor, theta: torch.Tensor, penalty: float) -> torch.Tensor:
-    """Weights W [F+1, D] minimising |[z, 1] W - theta|^2 + penalty |W without intercept|^2."""
-    design = torch.cat([z, torch.ones(len(z), 1, dtype=z.dtype)], 1)
-    reg = penalty * torch.eye(design.shape[1], dtype=z.dtype)
-    reg[-1, -1] = 0.0
-    return torch.linalg.solve(design.T @ design + reg, design.T @ theta)
 
 
 def _predict(z: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
@@ -60,20 +53,20 @@ class LinearGaussian:
             raise TrainingError(f"{label}: {n} simulations are too few to train on")
         self.shift, self.scale = x.mean(0), x.std(0).clamp_min(1e-8)
         z = (x - self.shift) / self.scale
-        perm = torch.randperm(n, generator=torch.Generator().manual_seed(seed))
-        val, train = perm[:n_val], perm[n_val:]
+        val = torch.zeros(n, dtype=torch.bool)
+        val[torch.randperm(n, generator=torch.Generator().manual_seed(seed))[:n_val]] = True
+        system = RidgeSystem(z, theta)
         theta_scale = theta.std(0).clamp_min(1e-12)
         scores, covs = [], []
         for penalty in self.cfg.penalties:
-            w = _ridge(z[train], theta[train], penalty)
-            resid_val = theta[val] - _predict(z[val], w)
+            resid_val = theta[val] - system.predict(val, system.solve(penalty, val))
             covs.append(torch.cov(resid_val.T).reshape(self.theta_dim, self.theta_dim))
             scores.append(float((resid_val / theta_scale).pow(2).mean()))
         best = min(range(len(scores)), key=scores.__getitem__)
-        self.weights = _ridge(z, theta, self.cfg.penalties[best])
+        self.weights = system.solve(self.cfg.penalties[best])
         self.cov = covs[best]
         train_nll = self._gaussian_nll(theta - _predict(z, self.weights), self.cov)
-        val_nll = self._gaussian_nll(theta[val] - _predict(z[val], self.weights), self.cov)
+        val_nll = self._gaussian_nll(theta[val] - system.predict(val, self.weights), self.cov)
         return {"train": [train_nll], "val": [val_nll], "best_val": val_nll, "epochs": 1,
                 "penalty": self.cfg.penalties[best]}
 

@@ -17,12 +17,27 @@ _PENALTIES = (1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)  # tried on standardised sum
 _FOLDS = 5
 
 
-def _ridge(z: torch.Tensor, y: torch.Tensor, penalty: float) -> torch.Tensor:
-    """[F + 1, D] weights (last row: intercept, not penalised)."""
-    design = torch.cat([z, torch.ones(len(z), 1, dtype=z.dtype)], 1)
-    reg = penalty * torch.eye(design.shape[1], dtype=z.dtype)
-    reg[-1, -1] = 0.0
-    return torch.linalg.solve(design.T @ design + reg, design.T @ y)
+class RidgeSystem:
+    """The normal equations of [z, 1] W = y, formed once, solved for any penalty and any rows left out
+    (a fold's Gram matrix is subtracted rather than recomputed: thousands of features are common)."""
+
+    def __init__(self, z: torch.Tensor, y: torch.Tensor):
+        self.design = torch.cat([z.double(), torch.ones(len(z), 1, dtype=torch.float64)], 1)
+        self.y = y.double()
+        self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
+
+    def solve(self, penalty: float, leave_out: torch.Tensor | None = None) -> torch.Tensor:
+        """[F + 1, D] weights (last row: intercept, not penalised), fitted without the rows `leave_out` (bool)."""
+        gram, moment = self.gram, self.moment
+        if leave_out is not None:
+            d = self.design[leave_out]
+            gram, moment = gram - d.T @ d, moment - d.T @ self.y[leave_out]
+        reg = penalty * torch.ones(gram.shape[0], dtype=gram.dtype)
+        reg[-1] = 0.0
+        return torch.linalg.solve(gram + torch.diag(reg), moment)
+
+    def predict(self, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+        return self.design[rows] @ weights
 
 
 class RidgeProjection(nn.Module):
@@ -39,21 +54,16 @@ class RidgeProjection(nn.Module):
     @torch.no_grad()
     def fit(self, x: torch.Tensor, theta: torch.Tensor, seed: int) -> torch.Tensor:
         """Fit on all pairs; return the out-of-fold predictions for the same pairs [N, D]."""
-        z, y = x.double(), theta.double()
-        folds = torch.randperm(len(z), generator=torch.Generator().manual_seed(seed)) % _FOLDS
+        system = RidgeSystem(x, theta)
+        folds = torch.randperm(len(x), generator=torch.Generator().manual_seed(seed)) % _FOLDS
         held = folds == 0
-        errors = [float((y[held] - self._predict(z[held], _ridge(z[~held], y[~held], p))).pow(2).mean())
-                  for p in _PENALTIES]
+        errors = [float((system.y[held] - system.predict(held, system.solve(p, held))).pow(2).mean()) for p in _PENALTIES]
         penalty = _PENALTIES[min(range(len(errors)), key=errors.__getitem__)]
-        out_of_fold = torch.empty_like(y)
+        out_of_fold = torch.empty_like(system.y)
         for k in range(_FOLDS):
             inside = folds == k
-            out_of_fold[inside] = self._predict(z[inside], _ridge(z[~inside], y[~inside], penalty))
-        w = _ridge(z, y, penalty)
+            out_of_fold[inside] = system.predict(inside, system.solve(penalty, inside))
+        w = system.solve(penalty)
         self.weight.copy_(w[:-1].float())
         self.bias.copy_(w[-1].float())
         return out_of_fold.float()
-
-    @staticmethod
-    def _predict(z: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
-        return z @ w[:-1] + w[-1]

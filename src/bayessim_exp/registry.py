@@ -47,6 +47,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.mdnn",
     "bayessim_exp.models.mdrff",
     "bayessim_exp.models.flow",
+    "bayessim_exp.models.linear",
     "bayessim_exp.real",
     "bayessim_exp.inference.bayessim.method",
     "bayessim_exp.sim.native",

@@ -34,6 +34,7 @@ class TrainConfig:
     patience: int  # epochs without validation improvement before stopping
     val_fraction: float
     weight_decay: float
+    project_inputs: bool  # replace the summaries by ridge predictions of the parameters (models/projection.py)
 
     def validate(self) -> None:
         if self.lr <= 0 or self.batch_size < 1 or self.max_epochs < 1 or self.patience < 1:
@@ -64,7 +65,8 @@ class StandardizedDensityModel:
     """Fitting and state shared by models with standardised inputs and targets.
 
     Subclasses build `self.net` (a module holding every trainable part and the standardisers
-    `self.x_norm`, `self.theta_norm`) and define `_nll(theta_std, x_std)` and `conditional`.
+    `self.x_norm`, `self.theta_norm`, and `self.projection` when cfg.project_inputs) and define
+    `_nll(theta_std, inputs)` and `conditional`, which reads its inputs through `self._inputs(x)`.
     """
 
     cfg: TrainConfig
@@ -72,18 +74,30 @@ class StandardizedDensityModel:
     x_norm: Standardizer
     theta_norm: Standardizer
     fitted: bool = False
+    projection = None
+
+    def _inputs(self, x: torch.Tensor) -> torch.Tensor:
+        """What the network sees: standardised summaries, or their ridge predictions of the parameters."""
+        z = self.x_norm(x)
+        return z if self.projection is None else self.projection(z)
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
         theta, x = theta.float(), x.float()
-        if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
+        inputs = None
+        if not self.fitted:  # fine-tuning keeps the first standardisation and projection, so weights stay meaningful
             torch.manual_seed(seed)
             self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
             self.x_norm.fit(x)
             self.theta_norm.fit(theta)
-        history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
+            if self.projection is not None:
+                inputs = self.projection.fit(self.x_norm(x), self.theta_norm(theta), seed)
+        if inputs is None:
+            with torch.no_grad():
+                inputs = self._inputs(x)
+        history = train_density(self.net, self._nll, self.theta_norm(theta), inputs, self.cfg,
                                 seed=seed, label=label, on_epoch=on_epoch)
         self.fitted = True
         return history

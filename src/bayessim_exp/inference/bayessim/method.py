@@ -13,9 +13,11 @@ import logging
 
 import torch
 
-from ...diagnostics.coverage import expected_coverage
+from ...diagnostics.coverage import expected_coverage, held_out_gain
+from ...diagnostics.guard import check_posterior
 from ...diagnostics.predictive import predictive_distances
 from ...distributions.base import ParameterDistribution
+from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
 from ...errors import ConfigError, PosteriorError
 from ...registry import register
@@ -42,8 +44,11 @@ class BayesSimConfig:
     proposal: str  # prior | posterior | gaussian | truncated
     finetune: bool  # continue training the previous round's model (false: re-initialise)
     max_components: int  # mixture components kept when combining several real trajectories
+    parameter_space: str  # box | probit: what the model is fitted in (distributions/probit.py)
 
     def validate(self) -> None:
+        if self.parameter_space not in ("box", "probit"):
+            raise ConfigError(f"parameter_space={self.parameter_space!r} not allowed; allowed: box, probit")
         if self.proposal not in PROPOSALS:
             raise ConfigError(f"proposal={self.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
         if self.max_components < 1:
@@ -54,6 +59,10 @@ class BayesSim(InferenceMethod):
     def __init__(self, cfg: BayesSimConfig, comp):
         self.cfg, self.comp = cfg, comp
         self._proposals: dict[int, ParameterDistribution | None] = {}
+        try:
+            self.probit = ProbitTransform(comp.prior) if cfg.parameter_space == "probit" else None
+        except ValueError as exc:
+            raise ConfigError(f"method.parameter_space=probit: {exc}") from None
 
     def stages(self) -> list[Stage]:
         return [
@@ -83,6 +92,8 @@ class BayesSim(InferenceMethod):
                 except ValueError as exc:
                     log.warning("round %d: %s; simulating from the prior instead", r, exc)
                     self._proposals[r] = None
+            elif self.cfg.proposal == "gaussian" and self.probit is not None:
+                self._proposals[r] = ProbitPosterior(moment_matched(previous.inner, seed=seed), self.probit)
             elif self.cfg.proposal == "gaussian":
                 self._proposals[r] = moment_matched(previous, self.comp.prior.low, self.comp.prior.high, seed=seed)
             else:
@@ -110,17 +121,29 @@ class BayesSim(InferenceMethod):
         r = ctx.round
         first = r if self.cfg.proposal in _SINGLE_ROUND_PROPOSALS else 1
         data = [self._split(ctx.output("summarize", k)) for k in range(first, r + 1)]
-        theta, x = torch.cat([d[0] for d in data]), torch.cat([d[1] for d in data])
+        theta, x = self._fitted_space(torch.cat([d[0] for d in data])), torch.cat([d[1] for d in data])
         model = self.comp.model()
         if r > 1 and self.cfg.finetune:
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
         history = model.fit(theta, x, seed=ctx.seed, label=f"round {r}")
         ctx.tb.losses(r, history)
-        theta_val, x_val = data[-1][2], data[-1][3]
+        theta_val, x_val = self._fitted_space(data[-1][2]), data[-1][3]
         d = self.comp.rc.diagnostics
         coverage = None if len(theta_val) == 0 else expected_coverage(
             model, theta_val, x_val, d.levels, d.coverage_samples, seed=ctx.seed)
-        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage}
+        # the gain over the prior is measured where the held-out parameters come from the prior: round 1
+        gain = None if len(theta_val) == 0 or r > 1 else held_out_gain(model, theta_val, x_val, self._fitted_prior())
+        guard = check_posterior(gain, coverage and coverage["hpd"])
+        for warning in guard.warnings:
+            log.warning("round %d: %s", r, warning)
+        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
+                "held_out_gain": gain, "guard": guard.to_dict()}
+
+    def _fitted_space(self, theta: torch.Tensor) -> torch.Tensor:
+        return theta if self.probit is None else self.probit.to_probit(theta).float()
+
+    def _fitted_prior(self) -> ParameterDistribution:
+        return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
         """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
@@ -135,7 +158,7 @@ class BayesSim(InferenceMethod):
         x_real = self.comp.summarizer(real.to(self.comp.device)).cpu()
         try:
             post = condition(model, x_real, self.comp.prior, self.cfg.max_components,
-                             proposal=self.proposal(ctx), seed=ctx.seed)
+                             proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit)
         except ValueError as exc:
             raise PosteriorError(f"round {ctx.round}: {exc}") from exc
         return {"posterior": post, "x_real": x_real, "predictive_distance": self._predictive(ctx, post, x_real)}
@@ -169,6 +192,8 @@ class BayesSim(InferenceMethod):
             "val_loss": hist["best_val"],
             "proposal": self.proposal_name(ctx),
             "coverage": fitted["coverage"],
+            "held_out_gain": fitted["held_out_gain"],
+            "guard": fitted["guard"],
             "predictive_distance": ctx.output("condition")["predictive_distance"],
         }
 

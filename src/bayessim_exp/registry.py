@@ -46,6 +46,8 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.flow",
     "bayessim_exp.real",
     "bayessim_exp.sim.native",
+    "bayessim_exp.sim.mjx",
+    "bayessim_exp.sim.auto",
     "bayessim_exp.rl.none",
 )
 

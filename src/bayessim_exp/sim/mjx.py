@@ -77,35 +77,45 @@ def to_torch(x: Any) -> torch.Tensor:
 
 
 class MjxSimulator(Simulator):
-    def __init__(self, task: Task, num_envs: int, cfg: MjxConfig):
+    """`randomize=False` runs every slot on the nominal model and ignores the parameters: what per-slot
+    parameters cost is measured against it (benchmarks/sim_throughput.py)."""
+
+    def __init__(self, task: Task, num_envs: int, cfg: MjxConfig, randomize: bool = True):
         super().__init__(task, num_envs)
-        self.cfg = cfg
+        self.cfg, self.randomize = cfg, randomize
         self.jax = jax = jax_setup(cfg.cache_dir)
         from mujoco import mjx
 
         self.jnp, self.mjx = jax.numpy, mjx
+        # every input committed to one device: a jitted function sees the same placement on every call
+        # (uncommitted first inputs and committed outputs would compile everything twice)
+        self._dev = jax.devices()[0]
         m = task.model
-        self.nominal = mjx.put_model(m)
-        self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if task.spec.needs_set_const else None
-        names = list(task.spec.fields) + self._varying_constants()
+        self.nominal = mjx.put_model(task.mjx_model)  # with the task's MJX tuning
+        needs_set_const = randomize and task.spec.needs_set_const
+        self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if needs_set_const else None
+        names = list(task.spec.fields) + self._varying_constants() if randomize else []
         for name in names:
             leaf = _get(self.nominal, name)
             if not isinstance(leaf, jax.Array) or not jax.numpy.issubdtype(leaf.dtype, jax.numpy.floating):
                 raise ConfigError(f"sim=mjx cannot set {name} per simulation: MJX keeps it static")
         # host copies of every batched leaf, [N, ...]; resets write rows and upload the whole leaf
         self._host = {n: np.repeat(np.asarray(_get(self.nominal, n))[None], num_envs, 0) for n in names}
-        self.leaves = {n: jax.numpy.asarray(v) for n, v in self._host.items()}
+        self.leaves = {n: self._put(v, _get(self.nominal, n).dtype) for n, v in self._host.items()}
         axes = jax.tree_util.tree_map(lambda _: None, self.nominal)
         self._model_axes = axes.tree_replace({n: 0 for n in names})
         template = mjx.make_data(self.nominal)
-        self.data = jax.tree_util.tree_map(lambda x: jax.numpy.repeat(x[None], num_envs, 0), template)
-        self.obs = jax.numpy.zeros((num_envs, task.obs_dim), jax.numpy.float32)
-        self.broken = jax.numpy.zeros(num_envs, bool)  # since the last reset
+        self.data = jax.tree_util.tree_map(lambda x: self._put(np.repeat(np.asarray(x)[None], num_envs, 0)), template)
+        self.obs = self._put(np.zeros((num_envs, task.obs_dim)), np.float32)
+        self.broken = self._put(np.zeros(num_envs, bool))  # since the last reset
         lo, hi = m.actuator_ctrlrange.T
         self._ctrl_mid, self._ctrl_half = (hi + lo) / 2, (hi - lo) / 2
         self._reset_fn = jax.jit(self._reset_all)
         self._step_fn = jax.jit(self._control_step)
         self._rollouts: dict[int, Any] = {}
+
+    def _put(self, x: Any, dtype: Any = None) -> Any:
+        return self.jax.device_put(np.asarray(x, dtype), self._dev)
 
     # configuration -----------------------------------------------------------------------
     @classmethod
@@ -183,26 +193,30 @@ class MjxSimulator(Simulator):
     # the protocol ------------------------------------------------------------------------------
     def _reset(self, params: torch.Tensor, ids: torch.Tensor, state: dict[str, np.ndarray]) -> torch.Tensor:
         ids_np, jnp = ids.numpy(), self.jnp
-        values = self.task.spec.field_values(self.task.model, params.numpy())
+        values = self.task.spec.field_values(self.task.model, params.numpy()) if self.randomize else {}
         if self._setconst is not None:
             for name, vals in values.items():
                 target = self._setconst.expand(name)
                 target[ids_np] = vals.reshape((len(ids_np),) + target.shape[1:])
             self._setconst.set_const(ids_np)
-            values.update({n: self._setconst.expanded(n)[ids_np] for n in self._host if n not in values})
+            for name in self._host:
+                if name not in values:  # batch.set_const leaves a constant shared while no slot changed it
+                    derived = self._setconst.expanded(name)
+                    values[name] = (np.repeat(getattr(self.task.model, name)[None], len(ids_np), 0) if derived is None
+                                    else derived[ids_np])
         for name, vals in values.items():
             self._host[name][ids_np] = vals.reshape((len(ids_np),) + self._host[name].shape[1:])
-        self.leaves = {n: jnp.asarray(v, self.leaves[n].dtype) for n, v in self._host.items()}
+        self.leaves = {n: self._put(v, self.leaves[n].dtype) for n, v in self._host.items()}
         mask = np.zeros(self.num_envs, bool)
         mask[ids_np] = True
         full_state = {}
         for field, v in state.items():
             current = getattr(self.data, field)
-            arr = np.zeros(current.shape, np.float64)
+            arr = np.zeros(current.shape, current.dtype)
             arr[ids_np] = np.asarray(v).reshape((len(ids_np),) + current.shape[1:])
-            full_state[field] = arr
+            full_state[field] = self._put(arr)
         self.data, self.obs, self.broken = self._reset_fn(self.leaves, self.data, self.obs, self.broken,
-                                                          jnp.asarray(mask), full_state)
+                                                          self._put(mask), full_state)
         return to_torch(self.obs)[ids.to(self.device)]
 
     def _step(self, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -212,7 +212,9 @@ class Pipeline:
         x = torch.cat([d[1] for d in data])
         if r > 1 and self.rc.ftune:
             model.load_state_dict(self.run_dir.load(r - 1, "fit")["model"])
-        history = model.fit(theta, x, seed=stage_seed(self.rc.seed, r, "fit"), label=f"round {r}")
+        # trained where the summaries were made: the training set stays on the GPU with device=cuda
+        history = model.fit(theta.to(self.device), x.to(self.device), seed=stage_seed(self.rc.seed, r, "fit"),
+                            label=f"round {r}")
         theta_val, x_val = data[-1][2], data[-1][3]
         d = self.rc.diagnostics
         coverage = None if len(theta_val) == 0 else expected_coverage(

@@ -20,9 +20,9 @@ from ..sim.params import ParamConfig, ParamSpec
 
 ASSETS = Path(__file__).parent / "assets"
 # what mjx_tuning may change: solver iterations and line-search iterations (MjOption), the Euler
-# damping flag, and MJX's contact caps (custom numerics it reads: contacts per geom pair, geom
-# pairs per collision function)
-MJX_TUNING = ("iterations", "ls_iterations", "eulerdamp", "max_contact_points", "max_geom_pairs")
+# damping flag, MJX's contact caps (custom numerics it reads: contacts per geom pair, geom pairs per
+# collision function), and the smallest geom condim (MJX has no frictionless contacts with elliptic cones)
+MJX_TUNING = ("iterations", "ls_iterations", "eulerdamp", "max_contact_points", "max_geom_pairs", "min_condim")
 
 
 @dataclasses.dataclass
@@ -95,6 +95,8 @@ class Task:
                 setattr(spec.option, key, int(tuning[key]))
         if "eulerdamp" in tuning and not tuning["eulerdamp"]:
             spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+        for geom in spec.geoms if "min_condim" in tuning else ():
+            geom.condim = max(geom.condim, int(tuning["min_condim"]))
         for key in ("max_contact_points", "max_geom_pairs"):
             if key in tuning:
                 spec.add_numeric(name=key, data=[float(tuning[key])])

@@ -125,7 +125,9 @@ class BayesSim(InferenceMethod):
         model = self.comp.model()
         if r > 1 and self.cfg.finetune:
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
-        history = model.fit(theta, x, seed=ctx.seed, label=f"round {r}")
+        # trained where the summaries were made: the training set stays on the GPU with device=cuda
+        dev = self.comp.device
+        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}")
         ctx.tb.losses(r, history)
         theta_val, x_val = self._fitted_space(data[-1][2]), data[-1][3]
         d = self.comp.rc.diagnostics

@@ -29,6 +29,7 @@ from .diagnostics.predictive import predictive_distances
 from .inference.bayessim import condition
 from .models.mixture import TruncatedMixture
 from .models.proposals import TruncatedPrior, moment_matched
+from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
 
 log = logging.getLogger(__name__)
@@ -125,7 +126,7 @@ def stage_seed(seed: int, round_index: int, stage: str) -> int:
 class Components:
     task: Any
     prior: Any
-    make_sim: Callable
+    sims: SimulatorPool
     summarizer: Any
     real: Any
     x_dim: int
@@ -147,27 +148,19 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
             raise ConfigError(f"config has no {group!r} group; allowed: {', '.join(registry.names(group))}")
     task = registry.build("task", cfg.task)
     prior = registry.build("prior", cfg.prior, spec=task.spec)
-    make_sim = registry.build("sim", cfg.sim)
+    sims = SimulatorPool(registry.build("sim", cfg.sim), task, rc.collect.chunk)
     summarizer = registry.build("summarizer", cfg.summarizer)
     summarizer.check(rc.collect.horizon)
     x_dim = summarizer.output_dim(task.obs_dim, task.action_dim, rc.collect.horizon)
     registry.parse_params("policy", cfg.policy)
     registry.parse_params("model", cfg.model)
     registry.build("rl", cfg.rl)
-    real = registry.build("real", cfg.real, task=task, make_sim=make_sim)
+    real = registry.build("real", cfg.real, task=task, sims=sims)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)
-    return Components(task, prior, make_sim, summarizer, real, x_dim)
+    return Components(task, prior, sims, summarizer, real, x_dim)
 
 
-def simulate(comp: Components, params: np.ndarray, policy, horizon: int, rng: np.random.Generator,
-             chunk: int, progress: bool) -> Trajectories:
-    parts = []
-    for start in range(0, len(params), chunk):
-        block = params[start : start + chunk]
-        sim = comp.make_sim(comp.task, len(block))
-        parts.append(sim.rollout(block, policy, horizon, rng, progress=progress))
-    return Trajectories.cat(parts)
 
 
 class Pipeline:
@@ -199,8 +192,7 @@ class Pipeline:
             torch.manual_seed(seed)
             theta = self.proposal(r).sample((self.rc.collect.trajectories,)).double()
         policy = self.comp.policy(self.cfg, seed)
-        traj = simulate(self.comp, theta.numpy(), policy, self.rc.collect.horizon,
-                        np.random.default_rng(seed), self.rc.collect.chunk, self.rc.logging.progress)
+        traj = self.comp.sims.rollout(theta, policy, self.rc.collect.horizon, seed, self.rc.logging.progress)
         return {"theta": theta.float(), "traj": traj.state_dict()}
 
     def summarize(self, r: int, collected: dict) -> dict:
@@ -399,8 +391,8 @@ class Pipeline:
         seed = stage_seed(self.rc.seed, r, "condition")
 
         def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
-            traj = simulate(self.comp, theta.numpy(), self.comp.policy(self.cfg, seed), self.rc.collect.horizon,
-                            np.random.default_rng(seed), self.rc.collect.chunk, False).to(self.device)
+            traj = self.comp.sims.rollout(theta, self.comp.policy(self.cfg, seed), self.rc.collect.horizon,
+                                          seed).to(self.device)
             x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
             return x[torch.isfinite(x).all(1)]
 

@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Callable
-
 import numpy as np
 import torch
 
 from .errors import ConfigError, DataError
 from .registry import register
+from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
 from .tasks.base import Task
 
@@ -41,14 +40,13 @@ class FileConfig:
 class SurrogateReal:
     """A simulated 'real' system with the task's real_params, which the inference never sees."""
 
-    def __init__(self, cfg: SurrogateConfig, task: Task, make_sim: Callable):
-        self.cfg, self.task, self.make_sim = cfg, task, make_sim
+    def __init__(self, cfg: SurrogateConfig, task: Task, sims: SimulatorPool):
+        self.cfg, self.task, self.sims = cfg, task, sims
         self.true_params: np.ndarray | None = task.real_values
 
     def collect(self, round_index: int, policy, horizon: int, seed: int) -> Trajectories:
         params = np.repeat(self.true_params[None], self.cfg.per_round, 0)
-        sim = self.make_sim(self.task, self.cfg.per_round)
-        traj = sim.rollout(params, policy, horizon, np.random.default_rng(seed))
+        traj = self.sims.get(self.cfg.per_round).rollout(params, policy, horizon, seed)
         if traj.diverged.any():
             raise DataError("the surrogate real system diverged; check the task's real_params")
         return traj
@@ -125,10 +123,10 @@ def save_trajectories(path: str | Path, traj: Trajectories, params: np.ndarray |
 
 
 @register("real", "surrogate", SurrogateConfig)
-def surrogate(cfg: SurrogateConfig, task: Task, make_sim: Callable) -> SurrogateReal:
-    return SurrogateReal(cfg, task, make_sim)
+def surrogate(cfg: SurrogateConfig, task: Task, sims: SimulatorPool) -> SurrogateReal:
+    return SurrogateReal(cfg, task, sims)
 
 
 @register("real", "file", FileConfig)
-def from_file(cfg: FileConfig, task: Task, make_sim: Callable) -> FileReal:
+def from_file(cfg: FileConfig, task: Task, sims: SimulatorPool) -> FileReal:
     return FileReal(cfg, task)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import types
-from typing import Protocol
 
 import mujoco
 import numpy as np
@@ -14,7 +13,8 @@ from mujoco import batch as mjbatch
 from ..errors import ConfigError
 from ..registry import register
 from ..tasks.base import Task
-from .trajectories import Trajectories
+from .base import Simulator, broke_down
+from .params import ParamSpec
 
 # warnings that mean the integration broke down (MuJoCo then silently resets the data)
 _DIVERGENCE_WARNINGS = [
@@ -22,72 +22,76 @@ _DIVERGENCE_WARNINGS = [
 ]
 
 
-class Policy(Protocol):
-    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor: ...
-
-
 @dataclasses.dataclass
 class NativeConfig:
-    nthread: int = 0  # 0: all CPUs
-    max_abs_qvel: float = 1.0e4  # a joint speed beyond this counts as diverged
+    nthread: int  # 0: all CPUs
+    max_abs_qvel: float  # a joint speed beyond this counts as diverged
 
     def validate(self) -> None:
         if self.nthread < 0 or self.max_abs_qvel <= 0:
             raise ConfigError("nthread must be >= 0 and max_abs_qvel > 0")
 
 
-class NativeSimulator:
-    """`rollout` for data collection; `reset`/`step` for RL, each slot with its own parameters."""
-
-    def __init__(self, task: Task, num_envs: int, cfg: NativeConfig | None = None):
-        self.task = task
-        self.cfg = cfg or NativeConfig()
-        self.num_envs = num_envs
-        self.batch = mjbatch.Batch(task.model, num_envs, nthread=self.cfg.nthread)
+class NativeSimulator(Simulator):
+    def __init__(self, task: Task, num_envs: int, cfg: NativeConfig):
+        super().__init__(task, num_envs)
+        self.cfg = cfg
+        self.batch = mjbatch.Batch(task.model, num_envs, nthread=cfg.nthread)
         derived = [f for f in task.data_fields if f not in ("qpos", "qvel", "act", "time")]
         self._stage = mujoco.mjtStage.mjSTAGE_VEL if derived else mujoco.mjtStage.mjSTAGE_NONE
         for field in task.data_fields:  # outputs are copied out only after calls made once they are bound
             self.batch.bind(field)
-        self._diverged = np.zeros(num_envs, dtype=bool)
+        self._obs = np.zeros((num_envs, task.obs_dim))
 
-    # parameters ---------------------------------------------------------------------
-    def set_params(self, values: np.ndarray, env_ids: np.ndarray | None = None) -> None:
-        ids = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids)
-        fields = self.task.spec.field_values(self.task.model, values)
-        for name, vals in fields.items():
+    @classmethod
+    def check_spec(cls, spec: ParamSpec) -> None:
+        unsupported = [f for f in spec.fields if f not in mjbatch.MODEL_FIELDS]
+        if unsupported:
+            raise ConfigError(f"sim=native cannot set {', '.join(unsupported)} per simulation "
+                              "(mujoco.batch.MODEL_FIELDS lists the fields it can)")
+
+    @property
+    def device(self) -> torch.device:
+        return torch.device("cpu")
+
+    def set_params(self, values: np.ndarray, ids: np.ndarray) -> None:
+        for name, vals in self.task.spec.field_values(self.task.model, values).items():
             target = self.batch.expand(name)
             target[ids] = vals.reshape((len(ids),) + target.shape[1:])
         if self.task.spec.needs_set_const:
             self.batch.set_const(ids)
 
-    # RL interface --------------------------------------------------------------------
-    def reset(self, params: np.ndarray, env_ids: np.ndarray | None, rng: np.random.Generator) -> np.ndarray:
-        """Give the slots new parameters and initial states; return their observations."""
-        ids = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids)
-        self.set_params(params, ids)
+    def _reset(self, params: torch.Tensor, ids: torch.Tensor, state: dict[str, np.ndarray]) -> torch.Tensor:
+        ids = ids.numpy()
+        self.set_params(params.numpy(), ids)
         self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
-        for field, values in self.task.reset_state(rng, len(ids)).items():
+        for field, values in state.items():
             self.batch.bind(field)[ids] = values
         self.batch.forward(ids, stage=mujoco.mjtStage.mjSTAGE_VEL)
-        self._diverged[ids] = False
-        return self.observe()[ids]
+        self._obs[ids] = self._observe()[ids]
+        return torch.as_tensor(self._obs[ids], dtype=torch.float32)
 
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Apply normalised actions for one control step; return (observations, diverged)."""
-        self.batch.ctrl[:] = self.task.ctrl(actions)
+    def _step(self, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        act = actions.detach().cpu().numpy().astype(np.float64)
+        self.batch.ctrl[:] = self.task.ctrl(act)
         before = self._warnings()
+        broken = np.zeros(self.num_envs, dtype=bool)
         try:
             self.batch.step(nstep=self.task.frame_skip, stage=self._stage)
         except mjbatch.SimulationError as exc:
-            self._diverged[exc.ids] = True
-        self._diverged |= self._warnings() > before
-        qvel = self.batch.qvel
-        bad = ~np.isfinite(self.batch.qpos).all(1) | ~np.isfinite(qvel).all(1)
-        bad |= (np.abs(np.nan_to_num(qvel, nan=np.inf)) > self.cfg.max_abs_qvel).any(1)
-        self._diverged |= bad
-        return self.observe(), self._diverged.copy()
+            broken[exc.ids] = True
+        broken |= self._warnings() > before
+        broken |= broke_down(self.batch.qpos, self.batch.qvel, self.cfg.max_abs_qvel)
+        obs = self._observe()
+        # a slot that broke down keeps its last finite observation
+        obs = np.where(broken[:, None] | self.diverged.numpy()[:, None], self._obs, obs)
+        reward = self.task.reward(self._obs, act, obs)
+        terminated = np.asarray(self.task.terminated(obs), dtype=bool)
+        self._obs = obs
+        return (torch.as_tensor(obs, dtype=torch.float32), torch.as_tensor(reward, dtype=torch.float32),
+                torch.as_tensor(terminated), torch.as_tensor(broken))
 
-    def observe(self) -> np.ndarray:
+    def _observe(self) -> np.ndarray:
         d = types.SimpleNamespace(**{f: self.batch.bind(f) for f in self.task.data_fields})
         return np.asarray(self.task.observe(d), dtype=np.float64)
 
@@ -95,43 +99,8 @@ class NativeSimulator:
         # per simulation: [warning, (lastinfo, number)]
         return self.batch.warning[:, _DIVERGENCE_WARNINGS, 1].sum(1)
 
-    # data collection -----------------------------------------------------------------
-    def rollout(self, params: np.ndarray, policy: Policy, horizon: int, rng: np.random.Generator,
-                progress: bool = False) -> Trajectories:
-        """Run one episode of `horizon` control steps in every slot, params [num_envs, D]."""
-        from tqdm.auto import tqdm
-
-        n, task = self.num_envs, self.task
-        obs = self.reset(params, None, rng)
-        states = np.empty((n, horizon + 1, task.obs_dim))
-        actions = np.zeros((n, horizon, task.action_dim))
-        rewards = np.zeros((n, horizon))
-        valid = np.zeros((n, horizon), dtype=bool)
-        alive = np.ones(n, dtype=bool)
-        states[:, 0] = obs
-        for t in tqdm(range(horizon), desc="simulate", leave=False, disable=None if progress else True, delay=2):
-            act = policy.act(torch.as_tensor(obs, dtype=torch.float32), t).numpy().astype(np.float64)
-            next_obs, diverged = self.step(act)
-            alive &= ~diverged
-            valid[:, t] = alive
-            actions[alive, t] = act[alive]
-            rewards[alive, t] = task.reward(obs[alive], act[alive], next_obs[alive])
-            # a terminated or diverged slot holds its last valid state
-            states[:, t + 1] = np.where(alive[:, None], next_obs, states[:, t])
-            alive &= ~np.asarray(task.terminated(next_obs), dtype=bool)
-            obs = next_obs
-        return Trajectories(
-            states=torch.as_tensor(states, dtype=torch.float32),
-            actions=torch.as_tensor(actions, dtype=torch.float32),
-            rewards=torch.as_tensor(rewards, dtype=torch.float32),
-            valid=torch.as_tensor(valid),
-            diverged=torch.as_tensor(self._diverged.copy()),
-            dt=task.cfg.control_dt,
-        )
-
 
 @register("sim", "native", NativeConfig)
-def native_backend(cfg: NativeConfig) -> "type[NativeSimulator]":
+def native_backend(cfg: NativeConfig):
     """The sim group builds a factory: (task, num_envs) -> simulator."""
     return lambda task, num_envs: NativeSimulator(task, num_envs, cfg)
-

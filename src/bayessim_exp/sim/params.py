@@ -29,6 +29,14 @@ import numpy as np
 from ..errors import ConfigError
 
 OPERATIONS = ("scaling", "additive", "set")
+# model fields that mj_setConst reads (MuJoCo's engine_setconst.c): changing one per environment means
+# recomputing the constants derived from it (subtree masses, inverse weights, actuator_acc0, ...)
+SET_CONST_INPUTS = frozenset({
+    "qpos0", "qpos_spring", "body_pos", "body_quat", "body_ipos", "body_iquat", "body_mass", "body_inertia",
+    "body_gravcomp", "jnt_pos", "jnt_axis", "dof_armature", "geom_size", "geom_pos", "geom_quat", "geom_margin",
+    "geom_gap", "site_pos", "site_quat", "tendon_stiffness", "tendon_damping", "tendon_armature", "wrap_prm",
+    "actuator_gear", "actuator_cranklength", "actuator_damping", "actuator_armature", "eq_data",
+})
 DISTRIBUTIONS = ("uniform", "loguniform", "gaussian")
 
 # field prefix -> (object type, count attribute of MjModel)
@@ -105,8 +113,7 @@ class ParamSpec:
         self.low = np.array([p.low for p in params])
         self.high = np.array([p.high for p in params])
         self.fields = sorted({t.field for p in params for t in p.targets})
-        inputs = set(getattr(mujoco.MjModel, "_setconst_inputs", ()))
-        self.needs_set_const = any(f in inputs or f.startswith("opt.") for f in self.fields)
+        self.needs_set_const = any(f in SET_CONST_INPUTS or f.startswith("opt.") for f in self.fields)
 
     @property
     def dim(self) -> int:
@@ -154,6 +161,17 @@ class ParamSpec:
                     else:
                         arr[idx] = arr[idx] + (t.coef * v).reshape(bshape)
         return out
+
+
+def _model_fields(model: mujoco.MjModel) -> list[str]:
+    arrays = [n for n in dir(model) if not n.startswith("_") and isinstance(getattr(model, n), np.ndarray)]
+    return arrays + [f"opt.{n}" for n in dir(model.opt) if not n.startswith("_")]
+
+
+def _is_model_field(model: mujoco.MjModel, field: str) -> bool:
+    if field.startswith("opt."):
+        return not field[4:].startswith("_") and hasattr(model.opt, field[4:])
+    return not field.startswith("_") and isinstance(getattr(model, field, None), np.ndarray)
 
 
 def _nominal(model: mujoco.MjModel, field: str) -> np.ndarray:
@@ -205,10 +223,8 @@ def _parse_target(where: str, raw: Any, model: mujoco.MjModel) -> Target:
     if not m:
         raise ConfigError(f"{where}: cannot read target {spec!r}; write e.g. body_mass[pole] or geom_size[rod,1]")
     field, index = m.group(1), [s.strip() for s in m.group(2).split(",")] if m.group(2) else []
-    from mujoco.batch import MODEL_FIELDS  # the fields a batch can give per-simulation values
-
-    if field not in MODEL_FIELDS:
-        raise ConfigError(f"{where}: {_unknown('model field', field, MODEL_FIELDS)}")
+    if not _is_model_field(model, field):
+        raise ConfigError(f"{where}: {_unknown('model field', field, _model_fields(model))}")
     template = _nominal(model, field)
     if field.startswith("opt."):
         if len(index) > 1:

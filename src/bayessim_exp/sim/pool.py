@@ -1,0 +1,42 @@
+"""Long-lived simulators of a run, one per batch size, and chunked rollouts over many parameter sets.
+
+A simulator is built once per size and reused by every stage and round (on MJX each new size is a
+compilation); a collect of 10,000 simulations in chunks of 4,096 builds two: 4,096 and 1,808.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+import torch
+
+from ..tasks.base import Task
+from .base import Policy, Simulator
+from .trajectories import Trajectories
+
+
+class SimulatorPool:
+    def __init__(self, make: Callable[[Task, int], Simulator], task: Task, chunk: int):
+        if chunk < 1:
+            raise ValueError(f"chunk must be >= 1, got {chunk}")
+        self.make, self.task, self.chunk = make, task, chunk
+        self._sims: dict[int, Simulator] = {}
+
+    def get(self, num_envs: int) -> Simulator:
+        if num_envs not in self._sims:
+            self._sims[num_envs] = self.make(self.task, num_envs)
+        return self._sims[num_envs]
+
+    def rollout(self, params: torch.Tensor | np.ndarray, policy: Policy, horizon: int, seed: int,
+                progress: bool = False, state: dict[str, np.ndarray] | None = None) -> Trajectories:
+        """Trajectories for every row of params [N, D], simulated `chunk` slots at a time; chunk k resets
+        with a seed derived from (seed, k). `state` (initial states [N, ...]) replaces the reset draw."""
+        params = np.asarray(params, dtype=np.float64)
+        seeds = np.random.SeedSequence(seed).generate_state(max(1, -(-len(params) // self.chunk)))
+        parts = []
+        for k, start in enumerate(range(0, len(params), self.chunk)):
+            block = params[start : start + self.chunk]
+            part_state = None if state is None else {f: v[start : start + self.chunk] for f, v in state.items()}
+            parts.append(self.get(len(block)).rollout(block, policy, horizon, int(seeds[k]), progress, part_state))
+        return Trajectories.cat(parts)

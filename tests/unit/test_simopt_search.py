@@ -40,10 +40,10 @@ def start(cfg: SimOptConfig):
 
 @pytest.mark.parametrize("kl_bound, updates", [(1.0, 10), (0.3, 20)])
 def test_updates_move_the_mean_to_the_true_parameters_shrink_the_covariance_and_respect_the_kl_bound(kl_bound, updates):
-    cfg = shipped_config(kl_bound=kl_bound, updates=updates, samples=200)
+    cfg = shipped_config(kl_bound=kl_bound, updates=updates)
     disc = Discrepancy(cfg.discrepancy, ("x", "y"), oscillator(TRUE[None])[0])
     first = start(cfg)
-    gaussians, history = search(first, lambda theta: disc(oscillator(theta)), cfg, LOW, HIGH,
+    gaussians, history = search(first, lambda theta: disc(oscillator(theta)), cfg, 200, LOW, HIGH,
                                 torch.Generator().manual_seed(0))
     assert len(gaussians) == len(history) == updates
     previous = first
@@ -60,16 +60,16 @@ def test_updates_move_the_mean_to_the_true_parameters_shrink_the_covariance_and_
 
 
 def test_the_spread_stops_at_the_floor():
-    cfg = shipped_config(updates=15, samples=200)
+    cfg = shipped_config(updates=15)
     disc = Discrepancy(cfg.discrepancy, ("x", "y"), oscillator(TRUE[None])[0])
-    gaussians, _ = search(start(cfg), lambda theta: disc(oscillator(theta)), cfg, LOW, HIGH,
+    gaussians, _ = search(start(cfg), lambda theta: disc(oscillator(theta)), cfg, 200, LOW, HIGH,
                           torch.Generator().manual_seed(1))
     floor = (cfg.min_std * (HIGH - LOW)) ** 2
     assert (torch.linalg.eigvalsh(gaussians[-1].cov / floor.sqrt()[:, None] / floor.sqrt()[None]) >= 1 - 1e-9).all()
 
 
 def test_draws_outside_the_box_are_simulated_inside_it_and_diverged_ones_get_no_weight():
-    cfg = shipped_config(updates=1, samples=50)
+    cfg = shipped_config(updates=1)
     seen = []
 
     def cost(theta):
@@ -79,21 +79,21 @@ def test_draws_outside_the_box_are_simulated_inside_it_and_diverged_ones_get_no_
         return c
 
     at_corner = Gaussian(LOW, start(cfg).cov)  # about half of every coordinate's draws fall below the box
-    _, history = search(at_corner, cost, cfg, LOW, HIGH, torch.Generator().manual_seed(2))
+    _, history = search(at_corner, cost, cfg, 200, LOW, HIGH, torch.Generator().manual_seed(2))
     assert ((seen[0] >= LOW) & (seen[0] <= HIGH)).all()
     assert (seen[0] == LOW).sum() > 25
     assert history[0]["diverged"] == 5
 
 
 def test_no_finite_cost_is_an_error_naming_the_update():
-    cfg = shipped_config(updates=2, samples=10)
+    cfg = shipped_config(updates=2)
     with pytest.raises(PosteriorError, match="update 1: fewer than 2 of 10"):
-        search(start(cfg), lambda theta: torch.full((len(theta),), float("inf")), cfg, LOW, HIGH,
+        search(start(cfg), lambda theta: torch.full((len(theta),), float("inf")), cfg, 10, LOW, HIGH,
                torch.Generator().manual_seed(0))
 
 
 @pytest.mark.parametrize("changes, match", [
-    ({"samples": 1}, "samples >= 2"), ({"kl_bound": 0.0}, "kl_bound > 0"), ({"min_std": 0.3}, "min_std"),
+    ({"updates": 0}, "updates >= 1"), ({"kl_bound": 0.0}, "kl_bound > 0"), ({"min_std": 0.3}, "min_std"),
     ({"rollout": "open"}, "allowed: closed_loop, recorded"),
 ])
 def test_bad_config_is_refused(changes, match):

@@ -26,8 +26,7 @@ ROLLOUTS = ("closed_loop", "recorded")
 class SimOptConfig:
     """method=simopt; defaults in conf/method/simopt.yaml."""
 
-    updates: int  # REPS updates per round
-    samples: int  # parameter samples per update, each rolled out from every real trajectory's start
+    updates: int  # REPS updates per round; each draws collect.trajectories / updates parameter samples
     kl_bound: float  # epsilon: KL(new || old) per update, for the sample weights and for the Gaussian
     min_temperature: float  # lower bound on the REPS temperature, in units of the costs' standard deviation
     min_std: float  # floor on the Gaussian's spread, as a fraction of each parameter's prior range
@@ -38,8 +37,8 @@ class SimOptConfig:
     discrepancy: DiscrepancyConfig
 
     def validate(self) -> None:
-        if self.updates < 1 or self.samples < 2:
-            raise ConfigError(f"need updates >= 1 and samples >= 2, got {self.updates} and {self.samples}")
+        if self.updates < 1:
+            raise ConfigError(f"need updates >= 1, got {self.updates}")
         if not self.kl_bound > 0 or not self.min_temperature > 0:
             raise ConfigError(f"need kl_bound > 0 and min_temperature > 0, got {self.kl_bound}, {self.min_temperature}")
         if not 0 < self.min_std < 0.25:  # a uniform prior's own std is 0.29 of its range
@@ -56,19 +55,21 @@ def initial_gaussian(mean: torch.Tensor, std: torch.Tensor, low: torch.Tensor, h
     return Gaussian(mean.double(), cov)
 
 
-def search(start: Gaussian, cost: Callable[[torch.Tensor], torch.Tensor], cfg: SimOptConfig, low: torch.Tensor,
-           high: torch.Tensor, generator: torch.Generator) -> tuple[list[Gaussian], list[dict]]:
-    """`cfg.updates` REPS updates from `start`; cost(theta [N, D] inside the box) -> [N]. Returns the Gaussian
-    after each update and one record per update."""
+def search(start: Gaussian, cost: Callable[[torch.Tensor], torch.Tensor], cfg: SimOptConfig, samples: int,
+           low: torch.Tensor, high: torch.Tensor, generator: torch.Generator) -> tuple[list[Gaussian], list[dict]]:
+    """`cfg.updates` REPS updates from `start`, each on `samples` draws; cost(theta [N, D] inside the box) -> [N].
+    Returns the Gaussian after each update and one record per update."""
+    if samples < 2:
+        raise ConfigError(f"SimOpt needs at least 2 parameter samples per update, got {samples}")
     low, high = low.double(), high.double()
     min_std = cfg.min_std * (high - low)
     current, gaussians, history = start, [], []
     for u in range(cfg.updates):
-        theta = current.sample(cfg.samples, generator)
+        theta = current.sample(samples, generator)
         costs = cost(torch.minimum(torch.maximum(theta, low), high)).double()
         finite = torch.isfinite(costs)
         if int(finite.sum()) < 2:
-            raise PosteriorError(f"SimOpt update {u + 1}: fewer than 2 of {cfg.samples} simulations gave a finite cost")
+            raise PosteriorError(f"SimOpt update {u + 1}: fewer than 2 of {samples} simulations gave a finite cost")
         step = reps_update(current, theta[finite], costs[finite], cfg.kl_bound, cfg.min_temperature, min_std)
         history.append({
             "update": u + 1, "mean_cost": float(costs[finite].mean()), "min_cost": float(costs[finite].min()),

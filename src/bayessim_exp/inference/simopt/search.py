@@ -11,6 +11,7 @@ finite (diverged simulations) get no weight.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Callable
 
 import torch
@@ -73,7 +74,8 @@ def search(start: Gaussian, cost: Callable[[torch.Tensor], torch.Tensor], cfg: S
         step = reps_update(current, theta[finite], costs[finite], cfg.kl_bound, cfg.min_temperature, min_std)
         history.append({
             "update": u + 1, "mean_cost": float(costs[finite].mean()), "min_cost": float(costs[finite].min()),
-            "diverged": int((~finite).sum()), "temperature": step.temperature, "weights_kl": step.weights_kl,
+            "diverged": int((~finite).sum()), "weights_kl": step.weights_kl,
+            "temperature": step.temperature if math.isfinite(step.temperature) else None,  # None: all costs equal
             "gaussian_kl": step.gaussian_kl, "step_fraction": step.step_fraction,
             "effective_samples": step.effective_samples,
         })

@@ -1,0 +1,60 @@
+"""Compare inference methods from the results.json files of finished runs (e.g. one --multirun sweep).
+
+    python -m bayessim_exp --multirun seed=0,1,2 task=Pendulum,Cartpole method=bayessim,simopt
+    python benchmarks/methods.py multirun/<date_time>
+
+Per (task, method), over seeds, for the last round: the error of the distribution's mean to the true
+parameters (mean over parameters of |mean - true| / prior range), the log density at the true
+parameters and its gain over the prior, the real roll-outs used, simulated roll-outs, and the wall time
+of all rounds (the sum of every stage's seconds). Prints mean ± sd over seeds and the seeds' values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+from collections import defaultdict
+from pathlib import Path
+
+
+def last_round(results: dict) -> dict:
+    names, true, rnd = results["param_names"], results["true_params"], results["rounds"][-1]
+    low, high = results["prior"]["low"], results["prior"]["high"]
+    error = statistics.fmean(abs(rnd["posterior_mean"][n] - true[n]) / (high[n] - low[n]) for n in names)
+    return {
+        "mean error / range": error,
+        "log p(true)": rnd["log_prob_true_posterior"],
+        "gain over prior": rnd["log_prob_gain"],
+        "real roll-outs": rnd["real_trajectories"],
+        "sim roll-outs": sum(r["sim_trajectories"] for r in results["rounds"]),
+        "wall s": sum(sum(r["seconds"].values()) for r in results["rounds"]),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("dirs", nargs="+", type=Path, help="run or sweep directories to search for results.json")
+    args = parser.parse_args()
+    rows: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for d in args.dirs:
+        for path in sorted(d.rglob("results.json")):
+            results = json.loads(path.read_text())
+            if results.get("true_params") and results["rounds"]:
+                rows[(results["task"], results.get("method", "bayessim"))].append(last_round(results))
+    if not rows:
+        raise SystemExit(f"no results.json with true parameters and a finished round under {args.dirs}")
+    keys = list(next(iter(rows.values()))[0])
+    print("| task | method | seeds | " + " | ".join(keys) + " |")
+    print("|---|---|---|" + "---|" * len(keys))
+    for (task, method), runs in sorted(rows.items()):
+        cells = []
+        for k in keys:
+            values = [r[k] for r in runs]
+            spread = f" ± {statistics.stdev(values):.3g}" if len(values) > 1 else ""
+            cells.append(f"{statistics.fmean(values):.3g}{spread} ({', '.join(f'{v:.3g}' for v in values)})")
+        print(f"| {task} | {method} | {len(runs)} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()

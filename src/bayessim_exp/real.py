@@ -25,7 +25,7 @@ from .tasks.base import Task
 
 @dataclasses.dataclass
 class SurrogateConfig:
-    per_round: int = 1
+    per_round: int
 
     def validate(self) -> None:
         if self.per_round < 1:
@@ -34,7 +34,7 @@ class SurrogateConfig:
 
 @dataclasses.dataclass
 class FileConfig:
-    path: str = "???"
+    path: str
 
 
 class SurrogateReal:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import importlib
+from pathlib import Path
 from typing import Any, Callable
 
 from omegaconf import DictConfig, OmegaConf
@@ -22,7 +23,8 @@ from omegaconf.errors import OmegaConfBaseException
 
 from .errors import ConfigError
 
-GROUPS = ("task", "prior", "policy", "summarizer", "model", "rl", "sim", "real")
+CONF_DIR = Path(__file__).parent / "conf"  # the package's config (a link to conf/ in a source checkout)
+GROUPS = ("task", "prior", "method", "policy", "summarizer", "model", "rl", "sim", "real")
 
 _BUILTIN_MODULES = (
     "bayessim_exp.tasks.pendulum",
@@ -45,6 +47,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.mdrff",
     "bayessim_exp.models.flow",
     "bayessim_exp.real",
+    "bayessim_exp.inference.bayessim.method",
     "bayessim_exp.sim.native",
     "bayessim_exp.rl.none",
 )
@@ -126,6 +129,11 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
         raise ConfigError(
             f"{group}.{key} is not a parameter of {group}={name}{hint}; allowed keys: {', '.join(allowed)}"
         )
+    missing = [f.name for f in dataclasses.fields(spec) if f.name not in container
+               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if missing:
+        raise ConfigError(f"{group}={name} has no value for {', '.join(missing)} "
+                          f"(the defaults live in conf/{group}/{name}.yaml; see `option_defaults`)")
     try:
         typed = OmegaConf.merge(OmegaConf.structured(spec), container)
         params = OmegaConf.to_object(typed)
@@ -144,6 +152,16 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
         except ConfigError as exc:
             raise ConfigError(f"{group}={name}: {exc}") from None
     return name, params
+
+
+def option_defaults(group: str, name: str) -> dict:
+    """The defaults of a built-in option: its YAML under the package's conf/ (empty if it has none)."""
+    path = CONF_DIR / group / f"{name}.yaml"
+    if not path.is_file():
+        return {}
+    values = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+    values.pop("defaults", None)
+    return values
 
 
 def build(group: str, cfg: DictConfig | dict, **deps: Any) -> Any:

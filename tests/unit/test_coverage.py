@@ -16,7 +16,7 @@ class _Oracle:
     """The exact posterior: coverage must be nominal up to Monte Carlo error."""
 
     def conditional(self, x):
-        from bayessim_exp.models.mixture import GaussianMixture
+        from bayessim_exp.distributions.mixture import GaussianMixture
 
         mean, cov = SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[None])
         return GaussianMixture(torch.zeros(1), mean[None], cov[None])

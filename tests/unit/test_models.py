@@ -7,9 +7,9 @@ standard deviations within a factor 1.33 (4000 simulations, small networks, fixe
 import pytest
 import torch
 
-from bayessim_exp.models.correction import posterior
-from bayessim_exp.models.mixture import GaussianMixture
-from bayessim_exp.priors import GaussianPrior
+from bayessim_exp.inference.bayessim.correction import posterior
+from bayessim_exp.distributions.mixture import GaussianMixture
+from bayessim_exp.distributions.independent import GaussianPrior
 from bayessim_exp.registry import build
 from linear_gaussian import LinearGaussian, gaussian_draws
 

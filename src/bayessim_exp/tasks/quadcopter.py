@@ -18,7 +18,7 @@ from .aerial import Aerial, AerialConfig
 
 @dataclasses.dataclass
 class QuadcopterConfig(AerialConfig):
-    target_pos: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 1.0])  # [m]
+    target_pos: list[float]  # [m]
 
 
 @register("task", "Quadcopter", QuadcopterConfig)

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import torch
 
-from ..models.base import PosteriorModel
-from ..models.correction import posterior
+from ...models.base import PosteriorModel
+from .correction import posterior
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,

@@ -48,6 +48,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.flow",
     "bayessim_exp.real",
     "bayessim_exp.inference.bayessim.method",
+    "bayessim_exp.inference.simopt.method",
     "bayessim_exp.sim.native",
     "bayessim_exp.rl.none",
 )

@@ -3,10 +3,11 @@
     python -m bayessim_exp --multirun seed=0,1,2 task=Pendulum,Cartpole method=bayessim,simopt
     python benchmarks/methods.py multirun/<date_time>
 
-Per (task, method), over seeds, for the last round: the error of the distribution's mean to the true
+Per (task, method), over the seeds of finished runs, for the last round: the error of the mean to the true
 parameters (mean over parameters of |mean - true| / prior range), the log density at the true
 parameters and its gain over the prior, the real roll-outs used, simulated roll-outs, and the wall time
-of all rounds (the sum of every stage's seconds). Prints mean ± sd over seeds and the seeds' values.
+of the run (from its config.yaml, written at the start, to its results.json, rewritten after every round:
+stage seconds in results.json leave out stages whose artifacts were deleted, such as BayesSim's collect). Prints mean ± sd over seeds and the seeds' values.
 """
 
 from __future__ import annotations
@@ -17,8 +18,10 @@ import statistics
 from collections import defaultdict
 from pathlib import Path
 
+from omegaconf import OmegaConf
 
-def last_round(results: dict) -> dict:
+
+def last_round(results: dict, run_dir: Path) -> dict:
     names, true, rnd = results["param_names"], results["true_params"], results["rounds"][-1]
     low, high = results["prior"]["low"], results["prior"]["high"]
     error = statistics.fmean(abs(rnd["posterior_mean"][n] - true[n]) / (high[n] - low[n]) for n in names)
@@ -28,7 +31,7 @@ def last_round(results: dict) -> dict:
         "gain over prior": rnd["log_prob_gain"],
         "real roll-outs": rnd["real_trajectories"],
         "sim roll-outs": sum(r["sim_trajectories"] for r in results["rounds"]),
-        "wall s": sum(sum(r["seconds"].values()) for r in results["rounds"]),
+        "wall s": (run_dir / "results.json").stat().st_mtime - (run_dir / "config.yaml").stat().st_mtime,
     }
 
 
@@ -40,10 +43,11 @@ def main() -> None:
     for d in args.dirs:
         for path in sorted(d.rglob("results.json")):
             results = json.loads(path.read_text())
-            if results.get("true_params") and results["rounds"]:
-                rows[(results["task"], results.get("method", "bayessim"))].append(last_round(results))
+            finished = len(results["rounds"]) == OmegaConf.load(path.parent / "config.yaml").rounds
+            if results.get("true_params") and finished:
+                rows[(results["task"], results["method"])].append(last_round(results, path.parent))
     if not rows:
-        raise SystemExit(f"no results.json with true parameters and a finished round under {args.dirs}")
+        raise SystemExit(f"no finished run with true parameters (results.json) under {args.dirs}")
     keys = list(next(iter(rows.values()))[0])
     print("| task | method | seeds | " + " | ".join(keys) + " |")
     print("|---|---|---|" + "---|" * len(keys))

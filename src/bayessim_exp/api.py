@@ -49,9 +49,9 @@ class FittedPosterior:
                     "prior": self.prior}, path)  # priors are small torch distributions: pickled whole
 
     @classmethod
-    def load(cls, path: str | Path) -> "FittedPosterior":
+    def load(cls, path: str | Path) -> FittedPosterior:
         d = torch.load(path, weights_only=False)
-        model = registry.build("model", {**registry.option_defaults("model", d["name"]), **d["config"], "name": d["name"]},
+        model = registry.build("model", {**d["config"], "name": d["name"]},
                                theta_dim=d["theta_dim"], x_dim=d["x_dim"])
         model.load_state_dict(d["state"])
         return cls(d["name"], model, d["prior"], d["config"], d["history"])
@@ -62,7 +62,7 @@ def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=N
     """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg overrides the defaults in
     conf/model/<name>.yaml."""
     theta, x = torch.as_tensor(theta), torch.as_tensor(x)
-    model = registry.build("model", {**registry.option_defaults("model", name), **cfg, "name": name},
+    model = registry.build("model", {**cfg, "name": name},
                            theta_dim=theta.shape[1], x_dim=x.shape[1])
     history = model.fit(theta, x, seed=seed, label=name)
     return FittedPosterior(name, model, prior, cfg, history)
@@ -70,7 +70,8 @@ def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=N
 
 def compose(overrides: list[str] | None = None):
     """The config the CLI would compose from these overrides."""
-    from hydra import compose as hydra_compose, initialize_config_dir
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
 
     with initialize_config_dir(config_dir=str(CONF_DIR.resolve()), version_base="1.3"):
         return hydra_compose(config_name="config", overrides=list(overrides or []))

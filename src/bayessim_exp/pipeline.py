@@ -95,7 +95,7 @@ class Pipeline:
             seconds = {}
             for stage in self.stages:
                 ctx.stage = stage.name
-                if self._finished(stage, r):
+                if self.run_dir.has(r, stage.name):
                     continue
                 t0 = time.perf_counter()
                 out = stage.run(ctx)
@@ -117,14 +117,13 @@ class Pipeline:
             self._tb.close()
         return results
 
-    def _finished(self, stage: Stage, r: int) -> bool:
-        """Done, or a transient artifact already consumed by every stage that reads it."""
-        return self.run_dir.has(r, stage.name) or (stage.transient and self._read_by_all(stage, r))
-
     def _drop_transient(self, r: int) -> None:
+        """A transient artifact read by every stage that needs it shrinks to its timing."""
         for stage in self.stages:
-            if stage.transient and self.run_dir.has(r, stage.name) and self._read_by_all(stage, r):
-                self.run_dir.stage_file(r, stage.name).unlink()
+            if stage.transient and self._read_by_all(stage, r):
+                out = self.run_dir.load(r, stage.name)
+                if set(out) != {"seconds"}:
+                    self.run_dir.save(r, stage.name, {"seconds": out["seconds"]})
 
     def _read_by_all(self, stage: Stage, r: int) -> bool:
         readers = [s for s in self.stages if stage.name in s.inputs]

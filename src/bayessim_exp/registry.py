@@ -15,8 +15,9 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import importlib
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -121,6 +122,8 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
         raise ConfigError(f"{group}: config has no 'name' key; allowed names: {', '.join(names(group))}")
     name = container.pop("name")
     spec = entry(group, name).params
+    # keys left out take the option's defaults from its YAML, the one place they are written
+    container = {**{k: v for k, v in option_defaults(group, name).items() if k != "name"}, **container}
     allowed = [f.name for f in dataclasses.fields(spec)]
     unknown = [k for k in container if k not in allowed]
     if unknown:
@@ -133,8 +136,7 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
     missing = [f.name for f in dataclasses.fields(spec) if f.name not in container
                and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
     if missing:
-        raise ConfigError(f"{group}={name} has no value for {', '.join(missing)} "
-                          f"(the defaults live in conf/{group}/{name}.yaml; see `option_defaults`)")
+        raise ConfigError(f"{group}={name} has no value for {', '.join(missing)}")
     try:
         typed = OmegaConf.merge(OmegaConf.structured(spec), container)
         params = OmegaConf.to_object(typed)

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-from typing import TYPE_CHECKING, Any, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,7 +23,7 @@ if TYPE_CHECKING:
 @dataclasses.dataclass(frozen=True)
 class Stage:
     name: str
-    run: Callable[["RoundContext"], dict]
+    run: Callable[[RoundContext], dict]
     inputs: tuple[str, ...] = ()  # stages of this round whose artifacts it reads
     # the artifact may be deleted once every stage that reads it is done (raw simulated trajectories)
     transient: bool = False
@@ -49,7 +50,7 @@ def check_stages(stages: list[Stage]) -> None:
 class RoundContext:
     """What a stage sees: the round, its seed, the run's components, and earlier artifacts."""
 
-    def __init__(self, comp: "Components", run_dir: "RunDir", round_index: int, seed: int, tb: Any):
+    def __init__(self, comp: Components, run_dir: RunDir, round_index: int, seed: int, tb: Any):
         self.comp, self.run_dir, self.round, self.run_seed, self.tb = comp, run_dir, round_index, seed, tb
         self.stage = ""
         self._cache: dict[tuple[int, str], dict] = {}

@@ -4,13 +4,13 @@ import math
 
 import pytest
 import torch
+from linear_gaussian import LinearGaussian
 
-from bayessim_exp.inference.bayessim.correction import posterior
 from bayessim_exp.distributions.importance import ImportancePosterior
+from bayessim_exp.distributions.independent import BoxUniform, GaussianPrior
 from bayessim_exp.distributions.mixture import GaussianMixture, TruncatedMixture
 from bayessim_exp.distributions.truncated_prior import TruncatedPrior
-from bayessim_exp.distributions.independent import BoxUniform, GaussianPrior
-from linear_gaussian import LinearGaussian
+from bayessim_exp.inference.bayessim.correction import posterior
 
 A = torch.tensor([[1.0, 0.5], [-0.3, 2.0], [0.7, 0.0]])
 SIM = LinearGaussian(A, torch.tensor([0.1, -0.2, 0.3]), 0.2 * torch.eye(3))

@@ -5,11 +5,11 @@ Cheap simulator: the linear-Gaussian one; 4000 training and 500 held-out simulat
 
 import pytest
 import torch
+from linear_gaussian import gaussian_draws
+from test_models import CONFIGS, PRIOR, SIM
 
 from bayessim_exp.diagnostics.coverage import expected_coverage
 from bayessim_exp.registry import build
-from linear_gaussian import gaussian_draws
-from test_models import CONFIGS, PRIOR, SIM
 
 
 class _Oracle:

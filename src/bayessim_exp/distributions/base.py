@@ -54,7 +54,7 @@ class ParameterDistribution:
         torch.save(self, path)
 
     @staticmethod
-    def load(path: str | Path) -> "ParameterDistribution":
+    def load(path: str | Path) -> ParameterDistribution:
         dist = torch.load(path, weights_only=False)
         if not isinstance(dist, ParameterDistribution):
             raise TypeError(f"{path} holds a {type(dist).__name__}, not a ParameterDistribution")

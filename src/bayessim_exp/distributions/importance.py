@@ -9,7 +9,7 @@ sampling-importance-resampling over a fixed pool of base draws.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 

@@ -97,12 +97,12 @@ class GaussianMixture(ParameterDistribution):
     def stddev(self) -> torch.Tensor:
         return torch.diagonal(self.covariance).sqrt()
 
-    def affine(self, shift: torch.Tensor, scale: torch.Tensor) -> "GaussianMixture":
+    def affine(self, shift: torch.Tensor, scale: torch.Tensor) -> GaussianMixture:
         """The mixture of shift + scale * theta (scale a vector: a diagonal map)."""
         s = scale.double()
         return GaussianMixture(self.log_weights, self.means * s + shift.double(), self.covs * s[:, None] * s[None, :])
 
-    def product(self, other: "GaussianMixture") -> "GaussianMixture":
+    def product(self, other: GaussianMixture) -> GaussianMixture:
         """The normalised product density p(theta) * q(theta) / Z, a mixture of K1*K2 Gaussians.
 
         N(a, A) N(b, B) = N(a; b, A + B) * N(c, C) with C = (A^-1 + B^-1)^-1, c = C (A^-1 a + B^-1 b).
@@ -121,7 +121,7 @@ class GaussianMixture(ParameterDistribution):
         d = self.dim
         return GaussianMixture(logits.reshape(-1), c.reshape(-1, d), C.reshape(-1, d, d))
 
-    def prune(self, max_components: int) -> "GaussianMixture":
+    def prune(self, max_components: int) -> GaussianMixture:
         """Keep the heaviest components (renormalised)."""
         if self.num_components <= max_components:
             return self

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import torch
 
-from ..errors import ConfigError, TrainingError
 from ..distributions.mixture import GaussianMixture
+from ..errors import ConfigError, TrainingError
 
 
 class PosteriorModel(Protocol):

@@ -13,10 +13,10 @@ import math
 import torch
 from torch import nn
 
+from ..distributions.mixture import GaussianMixture
 from ..errors import ConfigError
 from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
-from ..distributions.mixture import GaussianMixture
 
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 

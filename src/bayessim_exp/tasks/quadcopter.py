@@ -10,8 +10,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-import numpy as np
-
 from ..registry import register
 from .aerial import Aerial, AerialConfig
 

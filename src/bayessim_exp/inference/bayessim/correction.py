@@ -20,7 +20,7 @@ See docs/statistics.md for the assumptions.
 from __future__ import annotations
 
 import logging
-from typing import Sequence
+from collections.abc import Sequence
 
 import torch
 

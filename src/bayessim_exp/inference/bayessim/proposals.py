@@ -3,7 +3,6 @@ its moment-matched Gaussian (SNPE-A in closed form), or the prior truncated to i
 
 from __future__ import annotations
 
-
 import torch
 
 from ...distributions.mixture import GaussianMixture, TruncatedMixture

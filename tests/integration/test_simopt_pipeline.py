@@ -3,6 +3,7 @@
 import json
 
 import pytest
+
 from bayessim_exp import api
 from bayessim_exp.inference.simopt.method import SimOpt
 from bayessim_exp.pipeline import Pipeline

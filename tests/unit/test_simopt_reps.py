@@ -9,8 +9,7 @@ import scipy.special
 import torch
 from torch.distributions import MultivariateNormal, kl_divergence
 
-from bayessim_exp.inference.simopt.reps import (Gaussian, dual, floor_covariance, reps_update, reps_weights,
-                                                weighted_fit)
+from bayessim_exp.inference.simopt.reps import Gaussian, dual, floor_covariance, reps_update, reps_weights, weighted_fit
 
 
 def scipy_dual(log_eta: float, costs: np.ndarray, epsilon: float) -> float:

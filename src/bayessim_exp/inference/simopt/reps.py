@@ -61,7 +61,7 @@ class Gaussian:
         eps = torch.randn(n, self.dim, dtype=torch.float64, generator=generator)
         return self.mean + eps @ torch.linalg.cholesky(self.cov).T
 
-    def kl(self, other: "Gaussian") -> float:
+    def kl(self, other: Gaussian) -> float:
         """KL(self || other), exact."""
         L = torch.linalg.cholesky(other.cov)
         a = torch.linalg.solve_triangular(L, self.cov, upper=False)

@@ -1,6 +1,6 @@
 """Compare inference methods from the results.json files of finished runs (e.g. one --multirun sweep).
 
-    python -m bayessim_exp --multirun seed=0,1,2 task=Pendulum,Cartpole method=bayessim,simopt
+    python -m bayessim_exp --config-dir sweeps --config-name methods --multirun   # Pendulum, Cartpole x 3 seeds
     python benchmarks/methods.py multirun/<date_time>
 
 Per (task, method), over the seeds of finished runs, for the last round: the error of the mean to the true

@@ -135,7 +135,7 @@ class TruncatedMixture(ParameterDistribution):
     The normaliser P(box) is estimated once by Monte Carlo with `num_mc` draws, and sampling is
     exact, by rejection. When fewer than `min_hits` of those draws land inside (a posterior in
     many dimensions, or one far from the box), each component's box probability is estimated by
-    the GHK simulator instead (models/box_gaussian.py, `num_mc` // 50 weighted draws per
+    the GHK simulator instead (distributions/ghk.py, `num_mc` // 50 weighted draws per
     component) and draws come from GHK importance resampling: exact as the draws grow, and
     repeatable.
     """

@@ -3,7 +3,7 @@
 Its density has no closed-form product with Gaussians, so the SNPE-A correction cannot be done
 analytically. Rounds after the first therefore use truncated proposals (TSNPE, Deistler et al.
 2022): simulations come from the prior restricted to the previous posterior's highest-density
-region (models/proposals.py, `TruncatedPrior`), where the ratio prior / proposal is constant, so
+region (distributions/truncated_prior.py, `TruncatedPrior`), where the ratio prior / proposal is constant, so
 q itself is the posterior on that region and needs no correction, only the restriction to the
 prior's support. Given any other proposal, conditioning falls back to exact importance weights.
 """

@@ -3,7 +3,7 @@
 For i.i.d. real summaries x_1..x_n and a model trained on simulations from `proposal`,
 p(theta | x_1..x_n) is proportional to p(theta) * prod_i q(theta | x_i) / proposal(theta)
 (SNPE-A; the product of per-trajectory posteriors over p^(n-1) when the proposal is the prior).
-models/correction.py computes it, in closed form where it exists; docs/statistics.md explains.
+correction.py computes it, in closed form where it exists; docs/statistics.md explains.
 """
 
 from __future__ import annotations

@@ -50,6 +50,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.linear",
     "bayessim_exp.real",
     "bayessim_exp.inference.bayessim.method",
+    "bayessim_exp.inference.simopt.method",
     "bayessim_exp.sim.native",
     "bayessim_exp.sim.mjx",
     "bayessim_exp.sim.auto",

@@ -125,6 +125,11 @@ class Task:
         Fields left out keep the model's defaults (qpos0, zero velocities)."""
         return {"qpos": np.repeat(self.model.qpos0[None], n, 0), "qvel": np.zeros((n, self.model.nv))}
 
+    def state_from_observation(self, obs: np.ndarray) -> dict[str, np.ndarray] | None:
+        """The MjData state fields [n, ...] whose observation is obs [n, S], where the observation
+        determines the state (SimOpt restarts simulations from real initial states); None otherwise."""
+        return None
+
     def observe(self, d: Any, xp: Any = np) -> Any:
         raise NotImplementedError
 

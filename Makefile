@@ -11,7 +11,7 @@ install:
 	$(PIP) install -q -e ".[dev]"
 
 test:
-	$(PYTHON) -m pytest -q -n 2 --max-worker-restart=0 tests
+	$(PYTHON) -m pytest -q -rs -n 2 --max-worker-restart=0 tests
 
 test-fast:
 	$(PYTHON) -m pytest -q -m "not slow" tests

@@ -30,15 +30,20 @@ install_packages() {
   [ $rc -eq 0 ] || die "apt-get install munge slurmctld slurmd slurm-client failed (see $STATE/apt.log)"
 }
 
+MARK="# One-node Slurm on localhost, written by scripts/slurm_localhost.sh"
+
 write_config() {
   local cpus mem_mb
+  if [ -s "$CONF" ] && [ "$(head -n 1 "$CONF")" != "$MARK" ]; then
+    die "$CONF exists and was not written by this script: not replacing a real cluster's config"
+  fi
   cpus=$(nproc)
   mem_mb=$(( $(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 * 9 / 10 ))
   mkdir -p /etc/slurm "$STATE/ctld" "$STATE/d"
   # linuxproc/none plugins: no cgroups or accounting database needed (submitit reads job state from
   # its own result files when sacct has no database)
   cat >"$CONF" <<EOF
-# One-node Slurm on localhost, written by scripts/slurm_localhost.sh for the Slurm launcher test.
+$MARK
 ClusterName=localhost
 SlurmctldHost=$NODE(127.0.0.1)
 SlurmUser=root
@@ -77,6 +82,7 @@ start_munge() {
   chmod 0400 /etc/munge/munge.key
   mkdir -p /run/munge && chown munge:munge /run/munge
   runuser -u munge -- munged >>"$STATE/munged.log" 2>&1 || die "munged did not start (see $STATE/munged.log)"
+  touch "$STATE/munged.started"  # so that stop ends only a munged started here
   for _ in $(seq 20); do
     timeout 5 munge -n 2>/dev/null | timeout 5 unmunge >/dev/null 2>&1 && return 0
     sleep 0.5
@@ -109,11 +115,14 @@ start() {
 }
 
 stop() {
-  # only the daemons whose pid files this script's config names; munged was started here too
+  # only the daemons whose pid files this script's config names, and munged if this script started it
   for pidfile in "$STATE/slurmd.pid" "$STATE/slurmctld.pid"; do
     [ -s "$pidfile" ] && kill "$(cat "$pidfile")" 2>/dev/null
   done
-  [ -s /run/munge/munged.pid ] && kill "$(cat /run/munge/munged.pid)" 2>/dev/null
+  if [ -e "$STATE/munged.started" ] && [ -s /run/munge/munged.pid ]; then
+    kill "$(cat /run/munge/munged.pid)" 2>/dev/null
+    rm -f "$STATE/munged.started"
+  fi
   echo "slurm_localhost: stopped"
 }
 

@@ -52,14 +52,16 @@ def wait_for(condition, what, proc, timeout=300):
 
 
 def test_a_sweep_on_slurm_with_a_preempted_job_that_resumes(slurm, tmp_path):
-    sweep = tmp_path / "sweep"
+    # a timestamped sweep dir, as the stored sweeps have: the requeued job must come back to the same one
+    root = tmp_path / "sweeps"
     proc = subprocess.Popen([sys.executable, "-m", "bayessim_exp", "--multirun", *LAUNCHER, *RUN, "seed=0,1",
-                             f"hydra.sweep.dir={sweep}"], cwd=tmp_path, env=ENV, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                             f"hydra.sweep.dir={root}/${{now:%H-%M-%S-%f}}"], cwd=tmp_path, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     job_ids: list[str] = []
     try:
-        summarized = lambda: list(sweep.glob("0_*/round_001/summarize.pt"))  # noqa: E731
+        summarized = lambda: list(root.glob("*/0_*/round_001/summarize.pt"))  # noqa: E731
         wait_for(summarized, "job 0 to reach fitting", proc)
+        sweep = summarized()[0].parents[2]
         job_ids = sorted(p.name for p in (sweep / ".submitit").iterdir() if p.name[0].isdigit())
         preempted = next(j for j in job_ids if j.endswith("_0"))
         stamp = summarized()[0].stat().st_mtime_ns
@@ -75,6 +77,7 @@ def test_a_sweep_on_slurm_with_a_preempted_job_that_resumes(slurm, tmp_path):
     assert proc.returncode == 0, err[-3000:]
     logs = "".join(p.read_text() for p in (sweep / ".submitit" / preempted).glob("*_log.*"))
     assert "this job is preempted" in logs and f"Requeued job {preempted}" in logs, logs[-3000:]
+    assert [p.name for p in root.iterdir()] == [sweep.name]
     job0 = next(sweep.glob("0_*"))
     assert summarized()[0].stat().st_mtime_ns == stamp  # the finished stage survived the requeue untouched
 

@@ -25,8 +25,12 @@ from . import registry
 from .artifacts import RunDir
 from .errors import ConfigError, PosteriorError
 from .diagnostics.coverage import expected_coverage
+from .diagnostics.mismatch import mismatch_report, summaries_outside
 from .diagnostics.predictive import predictive_distances
+from .diagnostics.replay import replay
+from .diagnostics.replayed_check import replayed_check
 from .inference.bayessim import condition
+from .inference.combination import COMBINATIONS
 from .models.mixture import TruncatedMixture
 from .models.proposals import TruncatedPrior, moment_matched
 from .sim.trajectories import Trajectories
@@ -56,6 +60,7 @@ class CollectConfig:
 @dataclasses.dataclass
 class ConditionConfig:
     max_components: int = 50
+    combination: str = "dispersion"  # how several real trajectories are combined: dispersion | product
 
 
 @dataclasses.dataclass
@@ -64,6 +69,8 @@ class DiagnosticsConfig:
     coverage_samples: int = 500  # posterior draws per held-out simulation
     levels: list[float] = dataclasses.field(default_factory=lambda: [0.5, 0.9])
     predictive_sims: int = 200  # simulations at posterior and at prior draws for the predictive check (0: off)
+    replay_sims: int = 100  # posterior and prior draws replayed per real trajectory (0: off)
+    mismatch_alpha: float = 0.01  # significance of the model-mismatch tests
 
 
 @dataclasses.dataclass
@@ -106,13 +113,16 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
         torch.device(rc.device)
     except RuntimeError as exc:
         raise ConfigError(f"device={rc.device!r} is not a torch device: {exc}") from None
+    if rc.condition.combination not in COMBINATIONS:
+        raise ConfigError(f"condition.combination={rc.condition.combination!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
     if rc.proposal not in PROPOSALS:
         raise ConfigError(f"proposal={rc.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
     d = rc.diagnostics
     if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
-            or d.predictive_sims < 0):
+            or d.predictive_sims < 0 or d.replay_sims == 1 or d.replay_sims < 0 or not 0 < d.mismatch_alpha < 1):
         raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
-                          "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0")
+                          "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0, diagnostics.replay_sims "
+                          "0 or >= 2, 0 < diagnostics.mismatch_alpha < 1")
     return rc
 
 
@@ -181,6 +191,7 @@ class Pipeline:
         self.device = torch.device(self.rc.device)
         self._tb = None
         self._posteriors: dict[int, Any] = {}
+        self._dispersions: dict[int, Any] = {}
         self._proposals: dict[int, Any] = {}
 
     @property
@@ -285,8 +296,9 @@ class Pipeline:
 
     def condition(self, r: int, model, x_real: torch.Tensor):
         try:
-            post = condition(model, x_real, self.comp.prior, self.rc.condition.max_components,
-                             proposal=self.proposal(r), seed=stage_seed(self.rc.seed, r, "condition"))
+            post, self._dispersions[r] = condition(
+                model, x_real, self.comp.prior, self.rc.condition.max_components, proposal=self.proposal(r),
+                seed=stage_seed(self.rc.seed, r, "condition"), combination=self.rc.condition.combination)
         except ValueError as exc:
             raise PosteriorError(f"round {r}: {exc}") from exc
         self._posteriors[r] = post
@@ -361,6 +373,8 @@ class Pipeline:
                                 "posterior/log_prob_gain_over_prior": record["log_prob_gain"],
                                 "sim/diverged": record["diverged"],
                                 **{f"predictive_distance/{k}": v for k, v in (record["predictive_distance"] or {}).items()},
+                                **_replay_scalars(record["replay_check"]),
+                                "mismatch/flagged": float(record["mismatch"]["flagged"]),
                                 **{f"coverage/{kind}_{level}": value
                                    for kind, levels in (record["coverage"] or {}).items() for level, value in levels.items()}})
         if self._tb is not None:
@@ -379,6 +393,7 @@ class Pipeline:
             "log_prob_true_posterior": None, "log_prob_true_prior": None, "log_prob_gain": None,
             "predictive_distance": self._predictive(r, posterior, x_real),
         }
+        metrics.update(self._mismatch(r, posterior, x_real))
         if true is not None:
             t = torch.as_tensor(true, dtype=torch.float64)[None]
             lp_post, lp_prior = float(posterior.log_prob(t)), float(prior.log_prob(t))
@@ -405,6 +420,37 @@ class Pipeline:
             return x[torch.isfinite(x).all(1)]
 
         return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, seed)
+
+
+    def _mismatch(self, r: int, posterior, x_real: torch.Tensor) -> dict:
+        """The replayed predictive check, the dispersion of the per-trajectory posteriors and the
+        model-mismatch verdict (diagnostics/mismatch.py) for results.json."""
+        d = self.rc.diagnostics
+        dispersion = None if self._dispersions.get(r) is None else self._dispersions[r].record()
+        real = [self.run_dir.load(k, "real").get("traj") for k in range(1, r + 1)]
+        real = Trajectories.cat([Trajectories(**t) for t in real if t is not None])
+        check = None
+        if d.replay_sims:
+            try:
+                check = replayed_check(lambda theta, which: replay(self.comp.make_sim, self.comp.task, theta, real, which),
+                                       real, posterior, self.comp.prior, d.replay_sims,
+                                       stage_seed(self.rc.seed, r, "condition"), d.mismatch_alpha)
+            except NotImplementedError as exc:
+                log.info("round %d: replayed predictive check skipped: %s", r, exc)
+        if check is not None:
+            self.tb.replays(r, check, list(self.comp.task.obs_names))
+        outside = summaries_outside(x_real, self.run_dir.load(r, "summarize")["x"])
+        replay_record = None if check is None else check.record()
+        return {"replay_check": replay_record, "dispersion": dispersion,
+                "mismatch": mismatch_report(r, outside, replay_record, dispersion, d.mismatch_alpha)}
+
+
+def _replay_scalars(check: dict | None) -> dict[str, float]:
+    if check is None:
+        return {}
+    return {"predictive_replay/distance_posterior": float(np.mean(check["distance_posterior"])),
+            "predictive_replay/distance_prior": float(np.mean(check["distance_prior"])),
+            "predictive_replay/min_p_value": min(check["p_value"])}
 
 
 class _Stop(Exception):

@@ -11,15 +11,17 @@ from __future__ import annotations
 import torch
 
 from ..models.base import PosteriorModel
-from ..models.correction import posterior
+from .combination import Dispersion, combine
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
-              seed: int = 0):
-    """The posterior given x_obs [n, F] (or one summary [F]), as a distribution with sample and log_prob.
+              seed: int = 0, combination: str = "dispersion") -> tuple[object, Dispersion | None]:
+    """The posterior given x_obs [n, F] (or one summary [F]), as a distribution with sample and log_prob,
+    and the dispersion of the per-trajectory posteriors (None for one summary); `combination` says how
+    several summaries are combined (inference/combination.py).
 
     prior None means an improper flat prior (no truncation); proposal None means simulations from the prior.
     """
     x_obs = x_obs.reshape(-1, x_obs.shape[-1])
     conditionals = [model.conditional(x) for x in x_obs]
-    return posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)
+    return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed)

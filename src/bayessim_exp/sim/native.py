@@ -61,12 +61,14 @@ class NativeSimulator:
             self.batch.set_const(ids)
 
     # RL interface --------------------------------------------------------------------
-    def reset(self, params: np.ndarray, env_ids: np.ndarray | None, rng: np.random.Generator) -> np.ndarray:
-        """Give the slots new parameters and initial states; return their observations."""
+    def reset(self, params: np.ndarray, env_ids: np.ndarray | None, rng: np.random.Generator,
+              state: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """Give the slots new parameters and initial states (drawn by the task, or `state`'s
+        MjData fields [n, ...] when given); return their observations."""
         ids = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids)
         self.set_params(params, ids)
         self.batch.reset(ids, stage=mujoco.mjtStage.mjSTAGE_NONE)
-        for field, values in self.task.reset_state(rng, len(ids)).items():
+        for field, values in (self.task.reset_state(rng, len(ids)) if state is None else state).items():
             self.batch.bind(field)[ids] = values
         self.batch.forward(ids, stage=mujoco.mjtStage.mjSTAGE_VEL)
         self._diverged[ids] = False
@@ -97,12 +99,13 @@ class NativeSimulator:
 
     # data collection -----------------------------------------------------------------
     def rollout(self, params: np.ndarray, policy: Policy, horizon: int, rng: np.random.Generator,
-                progress: bool = False) -> Trajectories:
-        """Run one episode of `horizon` control steps in every slot, params [num_envs, D]."""
+                progress: bool = False, state: dict[str, np.ndarray] | None = None) -> Trajectories:
+        """Run one episode of `horizon` control steps in every slot, params [num_envs, D], from the
+        task's initial states or from `state` (MjData fields [num_envs, ...])."""
         from tqdm.auto import tqdm
 
         n, task = self.num_envs, self.task
-        obs = self.reset(params, None, rng)
+        obs = self.reset(params, None, rng, state)
         states = np.empty((n, horizon + 1, task.obs_dim))
         actions = np.zeros((n, horizon, task.action_dim))
         rewards = np.zeros((n, horizon))

@@ -97,6 +97,12 @@ class Task:
         Fields left out keep the model's defaults (qpos0, zero velocities)."""
         return {"qpos": np.repeat(self.model.qpos0[None], n, 0), "qvel": np.zeros((n, self.model.nv))}
 
+    def state_from_obs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """The MjData state fields [n, ...] that produce observations obs [n, S]: what replaying a
+        recorded trajectory from its own initial state needs. Tasks whose observation does not
+        determine the state leave this out; the replayed predictive check is then skipped."""
+        raise NotImplementedError(f"task {self.name} cannot map an observation to a simulator state")
+
     def observe(self, d: Any, xp: Any = np) -> Any:
         raise NotImplementedError
 

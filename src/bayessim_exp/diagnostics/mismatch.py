@@ -1,0 +1,54 @@
+"""Model mismatch: real data that the simulator, at any parameters the posterior allows, does not reproduce.
+
+Three signs, each recorded in results.json under `mismatch` and logged as a warning when present:
+- `summaries_outside`: real summary features outside the range of the round's m simulated summaries
+  (q extrapolates there). A real summary exchangeable with the simulated ones has each of its F
+  features outside with probability 2 / (m + 1); the count is flagged when a binomial(F, 2 / (m + 1))
+  count that large has probability below alpha / n;
+- `replay`: a real trajectory farther from every posterior replay than those lie from each other
+  (diagnostics/replayed_check.py, p below alpha / n);
+- `dispersion`: the per-trajectory posteriors disagree beyond their widths (Cochran's Q, chi^2
+  p-value below alpha; inference/combination.py).
+docs/statistics.md says what a user can do about each.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import torch
+from scipy.stats import binom
+
+log = logging.getLogger(__name__)
+
+
+def summaries_outside(x_real: torch.Tensor, x_sim: torch.Tensor) -> dict:
+    """Per real summary [n, F]: how many features lie outside [min, max] of the simulated summaries [m, F],
+    and the binomial tail probability of so many (see the module docstring)."""
+    low, high = x_sim.min(0).values, x_sim.max(0).values
+    counts = ((x_real < low) | (x_real > high)).sum(1)
+    chance = 2.0 / (len(x_sim) + 1)
+    p_values = [float(binom.sf(int(c) - 1, x_real.shape[1], chance)) for c in counts]
+    return {"features_outside": counts.tolist(), "p_value": p_values}
+
+
+def mismatch_report(round_index: int, outside: dict, replay: dict | None, dispersion: dict | None,
+                    alpha: float) -> dict:
+    """results.json's `mismatch` entry; logs a warning naming every sign found."""
+    reasons = []
+    n = len(outside["p_value"])
+    far = [i for i, p in enumerate(outside["p_value"]) if p < alpha / n]
+    if far:
+        reasons.append(f"real summaries {far} have {[outside['features_outside'][i] for i in far]} features outside "
+                       "the range of the simulated summaries")
+    if replay is not None and replay["mismatch"]:
+        bad = [i for i, p in enumerate(replay["p_value"]) if p < alpha / len(replay["p_value"])]
+        reasons.append(f"real trajectories {bad} lie farther from every posterior replay than the replays lie from "
+                       f"each other (p-values {[round(replay['p_value'][i], 4) for i in bad]})")
+    if dispersion is not None and dispersion["p_value"] < alpha:
+        reasons.append(f"the per-trajectory posteriors disagree (Birge ratio {dispersion['birge_ratio']:.2f}, "
+                       f"chi2 p = {dispersion['p_value']:.2g})")
+    if reasons:
+        log.warning("round %d: possible model mismatch: %s. See docs/statistics.md, 'Model mismatch'",
+                    round_index, "; ".join(reasons))
+    return {"flagged": bool(reasons), "reasons": reasons, "summaries_outside": outside}

@@ -165,6 +165,7 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     registry.parse_params("model", cfg.model)
     registry.build("rl", cfg.rl)
     real = registry.build("real", cfg.real, task=task, make_sim=make_sim)
+    real.check(rc.collect.horizon)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)
     return Components(task, prior, make_sim, summarizer, real, x_dim)
@@ -188,6 +189,7 @@ class Pipeline:
         self.comp = build_components(cfg, self.rc)
         self.run_dir = RunDir(out_dir)
         self.run_dir.bind_config(cfg)
+        self.run_dir.bind_fingerprint("real data", self.comp.real.fingerprint)
         self.device = torch.device(self.rc.device)
         self._tb = None
         self._posteriors: dict[int, Any] = {}
@@ -397,8 +399,9 @@ class Pipeline:
         if true is not None:
             t = torch.as_tensor(true, dtype=torch.float64)[None]
             lp_post, lp_prior = float(posterior.log_prob(t)), float(prior.log_prob(t))
-            metrics.update(log_prob_true_posterior=lp_post, log_prob_true_prior=lp_prior,
-                           log_prob_gain=lp_post - lp_prior)
+            finite = np.isfinite(lp_prior)  # outside the prior's box neither density nor gain exists (null)
+            metrics.update(log_prob_true_posterior=lp_post if finite else None, log_prob_true_prior=lp_prior if finite else None,
+                           log_prob_gain=lp_post - lp_prior if finite else None)
         lc = self.rc.logging
         plot_names = list(lc.plot_params) if lc.plot_params is not None else names[: lc.max_plot_params]
         self.tb.posterior(r, posterior, prior, names, plot_names, true, lc.plot_samples)

@@ -71,6 +71,7 @@ class DiagnosticsConfig:
     predictive_sims: int = 200  # simulations at posterior and at prior draws for the predictive check (0: off)
     replay_sims: int = 100  # posterior and prior draws replayed per real trajectory (0: off)
     mismatch_alpha: float = 0.01  # significance of the model-mismatch tests
+    mismatch_distance_ratio: float = 0.15  # replay distance, posterior over prior, above which a trajectory is unexplained
 
 
 @dataclasses.dataclass
@@ -119,10 +120,11 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
         raise ConfigError(f"proposal={rc.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
     d = rc.diagnostics
     if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
-            or d.predictive_sims < 0 or d.replay_sims == 1 or d.replay_sims < 0 or not 0 < d.mismatch_alpha < 1):
+            or d.predictive_sims < 0 or d.replay_sims == 1 or d.replay_sims < 0 or not 0 < d.mismatch_alpha < 1
+            or not 0 < d.mismatch_distance_ratio < 1):
         raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
                           "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0, diagnostics.replay_sims "
-                          "0 or >= 2, 0 < diagnostics.mismatch_alpha < 1")
+                          "0 or >= 2, 0 < diagnostics.mismatch_alpha < 1, 0 < diagnostics.mismatch_distance_ratio < 1")
     return rc
 
 
@@ -436,8 +438,9 @@ class Pipeline:
         if d.replay_sims:
             try:
                 check = replayed_check(lambda theta, which: replay(self.comp.make_sim, self.comp.task, theta, real, which),
-                                       real, posterior, self.comp.prior, d.replay_sims,
-                                       stage_seed(self.rc.seed, r, "condition"), d.mismatch_alpha)
+                                       real, posterior, self.comp.prior, num=d.replay_sims,
+                                       seed=stage_seed(self.rc.seed, r, "condition"), alpha=d.mismatch_alpha,
+                                       max_distance_ratio=d.mismatch_distance_ratio)
             except NotImplementedError as exc:
                 log.info("round %d: replayed predictive check skipped: %s", r, exc)
         if check is not None:

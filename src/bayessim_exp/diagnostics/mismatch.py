@@ -5,8 +5,8 @@ Three signs, each recorded in results.json under `mismatch` and logged as a warn
   (q extrapolates there). A real summary exchangeable with the simulated ones has each of its F
   features outside with probability 2 / (m + 1); the count is flagged when a binomial(F, 2 / (m + 1))
   count that large has probability below alpha / n;
-- `replay`: a real trajectory farther from every posterior replay than those lie from each other
-  (diagnostics/replayed_check.py, p below alpha / n);
+- `replay`: a real trajectory farther from every posterior replay than those lie from each other,
+  by a sizeable share of its distance to the prior's replays (diagnostics/replayed_check.py);
 - `dispersion`: the per-trajectory posteriors disagree beyond their widths (Cochran's Q, chi^2
   p-value below alpha; inference/combination.py).
 docs/statistics.md says what a user can do about each.
@@ -41,10 +41,11 @@ def mismatch_report(round_index: int, outside: dict, replay: dict | None, disper
     if far:
         reasons.append(f"real summaries {far} have {[outside['features_outside'][i] for i in far]} features outside "
                        "the range of the simulated summaries")
-    if replay is not None and replay["mismatch"]:
-        bad = [i for i, p in enumerate(replay["p_value"]) if p < alpha / len(replay["p_value"])]
+    if replay is not None and replay["flagged"]:
+        bad = replay["flagged"]
+        ratios = [round(replay["distance_posterior"][i] / replay["distance_prior"][i], 2) for i in bad]
         reasons.append(f"real trajectories {bad} lie farther from every posterior replay than the replays lie from "
-                       f"each other (p-values {[round(replay['p_value'][i], 4) for i in bad]})")
+                       f"each other, at {ratios} of their distance to the prior's replays")
     if dispersion is not None and dispersion["p_value"] < alpha:
         reasons.append(f"the per-trajectory posteriors disagree (Birge ratio {dispersion['birge_ratio']:.2f}, "
                        f"chi2 p = {dispersion['p_value']:.2g})")

@@ -15,7 +15,7 @@ from .combination import Dispersion, combine
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
-              seed: int = 0, combination: str = "dispersion") -> tuple[object, Dispersion | None]:
+              seed: int = 0, *, combination: str) -> tuple[object, Dispersion | None]:
     """The posterior given x_obs [n, F] (or one summary [F]), as a distribution with sample and log_prob,
     and the dispersion of the per-trajectory posteriors (None for one summary); `combination` says how
     several summaries are combined (inference/combination.py).

@@ -23,16 +23,15 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from scipy.optimize import minimize
 
 from bayessim_exp import api, registry
-from bayessim_exp.diagnostics.replay import replay
 from bayessim_exp.inference.combination import COMBINATIONS, combine
 from bayessim_exp.real import load_trajectories
 from bayessim_exp.policies import RandomPolicy
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "integration"))
 import independent_pendulum  # noqa: E402
+from independent_pendulum import best_fit, hpd_level  # noqa: E402
 
 PARAMETER_SETS = [(0.7, 0.35), (1.0, 0.5), (1.6, 0.7), (1.3, 0.85), (0.8, 0.6)]
 VARIANTS = {"rod": {}, "damped": {"damping": 0.05}, "bob": {"shape": "bob"}}
@@ -53,34 +52,6 @@ def fitted_model(cfg, task, prior, summarizer, sims: int, cache: Path):
     cache.mkdir(parents=True, exist_ok=True)
     torch.save(model.state_dict(), path)
     return model
-
-
-def best_fit(make_sim, task, real, steps: int) -> np.ndarray:
-    """Least squares over the first `steps` observed states of every trajectory, inside the prior box."""
-    real = real.truncate(steps)
-    n = real.num
-
-    def cost(theta: torch.Tensor) -> torch.Tensor:
-        which = torch.arange(n).repeat(len(theta))
-        out = replay(make_sim, task, theta.repeat_interleave(n, 0), real, which).states.double()
-        diff = (out - real.states.double()[which]).reshape(len(theta), n, steps + 1, -1)
-        return diff.pow(2).sum((1, 2, 3))
-
-    low, high = task.spec.low, task.spec.high
-    grid = torch.stack(torch.meshgrid(*[torch.linspace(lo, hi, 41, dtype=torch.float64) for lo, hi in zip(low, high)],
-                                      indexing="ij"), -1).reshape(-1, 2)
-    start = grid[cost(grid).argmin()].numpy()
-    res = minimize(lambda t: float(cost(torch.as_tensor(t)[None])), start, method="Nelder-Mead",
-                   bounds=list(zip(low, high)), options={"xatol": 1e-5, "fatol": 1e-10})
-    return res.x
-
-
-def hpd_level(post, theta: np.ndarray, draws: int = 4000) -> float:
-    t = torch.as_tensor(theta, dtype=torch.float64)[None]
-    with torch.random.fork_rng():
-        torch.manual_seed(1)
-        lp = post.log_prob(post.sample((draws,)).double())
-    return float((lp > post.log_prob(t)).double().mean())
 
 
 def main() -> None:

@@ -11,6 +11,10 @@ same sense, gravity pushing away from upright, actions in [-1, 1] scaled to a 2 
 from __future__ import annotations
 
 import numpy as np
+import torch
+from scipy.optimize import minimize
+
+from bayessim_exp.diagnostics.replay import replay
 
 GRAVITY = 9.81
 TORQUE_RANGE = 2.0
@@ -57,3 +61,33 @@ def simulate(mass: float, length: float, n: int, horizon: int, seed: int, *, dam
 
 def _observe(theta: np.ndarray, omega: np.ndarray) -> np.ndarray:
     return np.stack([np.cos(theta), np.sin(theta), omega], -1)
+
+
+def best_fit(make_sim, task, real, steps: int) -> np.ndarray:
+    """The least-squares fit of our model: the parameters inside the prior box whose replays (recorded
+    initial states, recorded actions) of the first `steps` steps are closest to the recorded states
+    (a 41 x 41 grid, then Nelder-Mead)."""
+    real = real.truncate(steps)
+    n = real.num
+
+    def cost(theta: torch.Tensor) -> torch.Tensor:
+        which = torch.arange(n).repeat(len(theta))
+        out = replay(make_sim, task, theta.repeat_interleave(n, 0), real, which).states.double()
+        return (out - real.states.double()[which]).reshape(len(theta), -1).pow(2).sum(1)
+
+    low, high = task.spec.low, task.spec.high
+    axes = [torch.linspace(lo, hi, 41, dtype=torch.float64) for lo, hi in zip(low, high)]
+    grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(axes))
+    start = grid[cost(grid).argmin()].numpy()
+    res = minimize(lambda t: float(cost(torch.as_tensor(t)[None])), start, method="Nelder-Mead",
+                   bounds=list(zip(low, high)), options={"xatol": 1e-5, "fatol": 1e-10})
+    return res.x
+
+
+def hpd_level(post, theta: np.ndarray, draws: int = 4000) -> float:
+    """The smallest highest-density region of `post` holding theta: inside the 90 % region iff < 0.9."""
+    t = torch.as_tensor(theta, dtype=torch.float64)[None]
+    with torch.random.fork_rng():
+        torch.manual_seed(1)
+        lp = post.log_prob(post.sample((draws,)).double())
+    return float((lp > post.log_prob(t)).double().mean())

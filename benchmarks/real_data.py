@@ -26,12 +26,12 @@ import torch
 
 from bayessim_exp import api, registry
 from bayessim_exp.inference.combination import COMBINATIONS, combine
-from bayessim_exp.real import load_trajectories
 from bayessim_exp.policies import RandomPolicy
+from bayessim_exp.real import load_trajectories
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "integration"))
-import independent_pendulum  # noqa: E402
-from independent_pendulum import best_fit, hpd_level  # noqa: E402
+import independent_pendulum
+from independent_pendulum import best_fit, hpd_level
 
 PARAMETER_SETS = [(0.7, 0.35), (1.0, 0.5), (1.6, 0.7), (1.3, 0.85), (0.8, 0.6)]
 VARIANTS = {"rod": {}, "damped": {"damping": 0.05}, "bob": {"shape": "bob"}}

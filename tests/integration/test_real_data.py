@@ -2,18 +2,16 @@
 RK4, not our MJCF): the posterior covers our model's best fit, and data the model cannot represent
 are either still covered or flagged as a model mismatch."""
 
+import independent_pendulum
 import numpy as np
 import pytest
 import torch
+from independent_pendulum import best_fit, hpd_level
 
 from bayessim_exp import api, registry
 from bayessim_exp.inference.combination import combine
-from bayessim_exp.pipeline import Pipeline
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.real import load_trajectories
-
-import independent_pendulum
-from independent_pendulum import best_fit, hpd_level
 
 pytestmark = pytest.mark.slow
 

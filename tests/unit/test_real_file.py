@@ -31,8 +31,7 @@ def _build(compose, tmp_path, path, *extra):
     ({"actions": np.full((2, 30, 1), 1.5)}, r"control range \(\[-2, 2\] for Pendulum\).*divide a symmetric torque"),
     ({"dt": np.array(0.01)}, r"dt=0.01 s but task Pendulum runs at 0.05 s; resample"),
     ({"states": np.zeros((31, 3)), "actions": np.zeros((30, 1))}, r"without its leading axis.*states\[None\]"),
-    ({"states": np.zeros((2, 11, 3)), "actions": np.zeros((2, 10, 1))}, r"10 steps, fewer than collect.horizon=20.*"
-                                                                          r"collect.horizon=10"),
+    ({"states": np.zeros((2, 11, 3)), "actions": np.zeros((2, 10, 1))}, r"10 steps, fewer than .*collect.horizon=10"),
 ])
 def test_a_malformed_file_is_refused_before_any_simulation_saying_how_to_fix_it(compose, tmp_path, monkeypatch,
                                                                                change, message):

@@ -47,7 +47,7 @@ def test_a_replay_at_the_recording_parameters_is_the_recording(compose):
 def _check(task, real, posterior_mean, prior):
     posterior = GaussianMixture(torch.zeros(1), torch.tensor([posterior_mean], dtype=torch.float64),
                                 torch.diag(torch.tensor([0.01, 0.002], dtype=torch.float64)) ** 2 * torch.ones(1, 1, 1))
-    simulate = lambda theta, which: replay(lambda t, n: NativeSimulator(t, n), task,  # noqa: E731
+    simulate = lambda theta, which: replay(lambda t, n: NativeSimulator(t, n), task,
                                            theta.clamp(prior.low, prior.high), real, which)
     return replayed_check(simulate, real, posterior, prior, num=100, seed=0, alpha=0.01, max_distance_ratio=0.15)
 

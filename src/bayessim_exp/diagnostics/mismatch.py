@@ -15,9 +15,9 @@ docs/statistics.md says what a user can do about each.
 from __future__ import annotations
 
 import logging
+import math
 
 import torch
-from scipy.stats import binom
 
 log = logging.getLogger(__name__)
 
@@ -28,8 +28,15 @@ def summaries_outside(x_real: torch.Tensor, x_sim: torch.Tensor) -> dict:
     low, high = x_sim.min(0).values, x_sim.max(0).values
     counts = ((x_real < low) | (x_real > high)).sum(1)
     chance = 2.0 / (len(x_sim) + 1)
-    p_values = [float(binom.sf(int(c) - 1, x_real.shape[1], chance)) for c in counts]
+    p_values = [_binomial_tail(int(c), x_real.shape[1], chance) for c in counts]
     return {"features_outside": counts.tolist(), "p_value": p_values}
+
+
+def _binomial_tail(count: int, trials: int, chance: float) -> float:
+    """P(X >= count) for X ~ binomial(trials, chance), summed exactly in log space."""
+    terms = [math.lgamma(trials + 1) - math.lgamma(k + 1) - math.lgamma(trials - k + 1) + k * math.log(chance)
+             + (trials - k) * math.log1p(-chance) for k in range(count, trials + 1)]
+    return min(1.0, math.exp(torch.logsumexp(torch.tensor(terms, dtype=torch.float64), 0).item())) if terms else 0.0
 
 
 def mismatch_report(round_index: int, outside: dict, replay: dict | None, dispersion: dict | None,

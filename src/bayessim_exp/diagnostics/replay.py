@@ -8,7 +8,7 @@ difference. `replay` is the one place that calls the simulator for this.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import torch

@@ -22,7 +22,7 @@ the prior's: the posterior leaves a sizeable part of what the prior could not ex
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 

@@ -19,10 +19,9 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Sequence
+from collections.abc import Sequence
 
 import torch
-from scipy.stats import chi2
 
 from ..models.correction import posterior
 
@@ -69,7 +68,8 @@ def dispersion(singles: Sequence, seed: int = 0) -> Dispersion:
     d = m_i - pooled
     q = float((d.unsqueeze(-2) @ p_i @ d.unsqueeze(-1)).sum())
     dof = m_i.shape[1] * (len(singles) - 1)
-    return Dispersion(q, dof, float(chi2.sf(q, dof)))
+    # the chi^2 survival function is the regularised upper incomplete gamma function
+    return Dispersion(q, dof, float(torch.special.gammaincc(torch.tensor(dof / 2.0), torch.tensor(q / 2.0))))
 
 
 def combine(method: str, conditionals: Sequence, prior, proposal=None, *, max_components: int = 50,

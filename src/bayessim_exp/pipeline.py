@@ -426,7 +426,6 @@ class Pipeline:
 
         return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, seed)
 
-
     def _mismatch(self, r: int, posterior, x_real: torch.Tensor) -> dict:
         """The replayed predictive check, the dispersion of the per-trajectory posteriors and the
         model-mismatch verdict (diagnostics/mismatch.py) for results.json."""
@@ -435,20 +434,26 @@ class Pipeline:
         real = [self.run_dir.load(k, "real").get("traj") for k in range(1, r + 1)]
         real = Trajectories.cat([Trajectories(**t) for t in real if t is not None])
         check = None
-        if d.replay_sims:
-            try:
-                check = replayed_check(lambda theta, which: replay(self.comp.make_sim, self.comp.task, theta, real, which),
-                                       real, posterior, self.comp.prior, num=d.replay_sims,
-                                       seed=stage_seed(self.rc.seed, r, "condition"), alpha=d.mismatch_alpha,
-                                       max_distance_ratio=d.mismatch_distance_ratio)
-            except NotImplementedError as exc:
-                log.info("round %d: replayed predictive check skipped: %s", r, exc)
-        if check is not None:
+        if d.replay_sims and _can_replay(self.comp.task, real, r):
+            check = replayed_check(lambda theta, which: replay(self.comp.make_sim, self.comp.task, theta, real, which),
+                                   real, posterior, self.comp.prior, num=d.replay_sims,
+                                   seed=stage_seed(self.rc.seed, r, "condition"), alpha=d.mismatch_alpha,
+                                   max_distance_ratio=d.mismatch_distance_ratio)
             self.tb.replays(r, check, list(self.comp.task.obs_names))
         outside = summaries_outside(x_real, self.run_dir.load(r, "summarize")["x"])
         replay_record = None if check is None else check.record()
         return {"replay_check": replay_record, "dispersion": dispersion,
                 "mismatch": mismatch_report(r, outside, replay_record, dispersion, d.mismatch_alpha)}
+
+
+def _can_replay(task, real: Trajectories, r: int) -> bool:
+    """Whether the task maps observations back to simulator states (Task.state_from_obs)."""
+    try:
+        task.state_from_obs(real.states[:1, 0].double().numpy())
+    except NotImplementedError as exc:
+        log.info("round %d: replayed predictive check skipped: %s", r, exc)
+        return False
+    return True
 
 
 def _replay_scalars(check: dict | None) -> dict[str, float]:

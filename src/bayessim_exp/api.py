@@ -40,11 +40,12 @@ class FittedPosterior:
     max_components: int = 50
     probit: ProbitTransform | None = None  # set when the model was fitted in probit space
 
-    def posterior(self, x_obs: torch.Tensor, proposal=None):
+    def posterior(self, x_obs: torch.Tensor, proposal=None, combination: str = "dispersion"):
         """The posterior given one summary [F] or several i.i.d. ones [n, F]; `proposal`: what the
-        training parameters were drawn from, if not the prior (SNPE-A correction)."""
+        training parameters were drawn from, if not the prior (SNPE-A correction); `combination`: how
+        several summaries are combined (inference/bayessim/combination.py)."""
         return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components, proposal=proposal,
-                         probit=self.probit)
+                         probit=self.probit, combination=combination)[0]
 
     def save(self, path: str | Path) -> None:
         torch.save({"name": self.name, "config": self.config, "state": self.model.state_dict(),

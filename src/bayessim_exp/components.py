@@ -59,6 +59,7 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     registry.parse_params("policy", cfg.policy)
     registry.parse_params("model", cfg.model)
     real = registry.build("real", cfg.real, task=task, sims=sims)
+    real.check(rc.collect.horizon)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)
     comp = Components(cfg, rc, task, prior, sims, summarizer, real, x_dim)

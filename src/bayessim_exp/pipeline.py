@@ -38,6 +38,7 @@ class Pipeline:
         self.comp: Components = build_components(cfg, self.rc)
         self.run_dir = RunDir(out_dir)
         self.run_dir.bind_config(cfg)
+        self.run_dir.bind_fingerprint("real data", self.comp.real.fingerprint)
         self.stages = [Stage("real", self.real), *self.comp.method.stages(), Stage("score", self.score),
                        *(self.comp.rl.stages() if self.comp.rl is not None else [])]
         check_stages(self.stages)

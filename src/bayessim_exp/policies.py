@@ -34,3 +34,14 @@ class RandomPolicy:
 @register("policy", "random", RandomPolicyConfig)
 def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int) -> RandomPolicy:
     return RandomPolicy(action_dim, seed)
+
+
+class OpenLoopPolicy:
+    """Recorded actions [N, T, A] played step by step, whatever the observations (replaying real
+    trajectories in simulation)."""
+
+    def __init__(self, actions: torch.Tensor):
+        self.actions = actions
+
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        return self.actions[:, t].to(obs.device)

@@ -141,3 +141,27 @@ def pair_plot(samples: np.ndarray, names: list[str], low: np.ndarray, high: np.n
                  fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.95))
     return fig
+
+
+def replay_plot(real: np.ndarray, posterior: np.ndarray, prior: np.ndarray, obs_names: list[str], dt: float,
+                p_values: list[float], title: str, max_lines: int = 20) -> plt.Figure:
+    """Real trajectories [n, T+1, S] (black) over replays at posterior [n, m, T+1, S] (blue) and prior (grey)
+    draws from the same initial states under the same actions; one row per trajectory, one column per feature."""
+    n, s = real.shape[0], real.shape[-1]
+    fig, axes = plt.subplots(n, s, figsize=(3 * s + 1, 2.2 * n + 1), squeeze=False)
+    t = dt * np.arange(real.shape[1])
+    for i in range(n):
+        for j in range(s):
+            ax = axes[i, j]
+            ax.plot(t, prior[i, :max_lines, :, j].T, color="0.75", lw=0.6)
+            ax.plot(t, posterior[i, :max_lines, :, j].T, color="C0", lw=0.6, alpha=0.7)
+            ax.plot(t, real[i, :, j], color="black", lw=1.5)
+            if i == 0:
+                ax.set_title(obs_names[j], fontsize=9)
+            if j == 0:
+                ax.set_ylabel(f"real {i}\np = {p_values[i]:.3g}", fontsize=8)
+            if i == n - 1:
+                ax.set_xlabel("time [s]")
+    fig.suptitle(f"{title}: real (black), posterior replays (blue), prior replays (grey)")
+    fig.tight_layout()
+    return fig

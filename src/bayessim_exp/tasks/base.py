@@ -127,7 +127,8 @@ class Task:
 
     def state_from_observation(self, obs: np.ndarray) -> dict[str, np.ndarray] | None:
         """The MjData state fields [n, ...] whose observation is obs [n, S], where the observation
-        determines the state (SimOpt restarts simulations from real initial states); None otherwise."""
+        determines the state (SimOpt and the replayed predictive check restart simulations from real
+        initial states); None otherwise."""
         return None
 
     def observe(self, d: Any, xp: Any = np) -> Any:

@@ -12,15 +12,19 @@ from __future__ import annotations
 
 import torch
 
+from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
 from ...models.base import PosteriorModel
-from .correction import posterior
+from .combination import Dispersion, combine
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
-              seed: int = 0, probit: ProbitTransform | None = None):
-    """The posterior given x_obs [n, F] (or one summary [F]), as a distribution with sample and log_prob.
+              seed: int = 0, probit: ProbitTransform | None = None,
+              combination: str = "dispersion") -> tuple[ParameterDistribution, Dispersion | None]:
+    """The posterior given x_obs [n, F] (or one summary [F]), and the dispersion of the per-trajectory
+    posteriors (None for one summary); `combination` says how several summaries are combined
+    (combination.py).
 
     prior None means an improper flat prior (no truncation); proposal None means simulations from the prior.
     probit: the transform the model's parameters were fitted in, or None for parameter units.
@@ -28,10 +32,10 @@ def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components:
     x_obs = x_obs.reshape(-1, x_obs.shape[-1])
     conditionals = [model.conditional(x) for x in x_obs]
     if probit is None:
-        return posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)
-    post = posterior(conditionals, standard_normal_prior(probit.dim), _probit_proposal(proposal, prior),
-                     max_components=max_components, seed=seed)
-    return ProbitPosterior(post, probit)
+        return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed)
+    post, spread = combine(combination, conditionals, standard_normal_prior(probit.dim),
+                           _probit_proposal(proposal, prior), max_components=max_components, seed=seed)
+    return ProbitPosterior(post, probit), spread
 
 
 def _probit_proposal(proposal, prior):

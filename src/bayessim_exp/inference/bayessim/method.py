@@ -15,7 +15,10 @@ import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
 from ...diagnostics.guard import check_posterior
+from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
+from ...diagnostics.replay import replay
+from ...diagnostics.replayed_check import replayed_check
 from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
@@ -24,6 +27,7 @@ from ...registry import register
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, real_trajectories
+from .combination import COMBINATIONS
 from .condition import condition
 from .proposals import moment_matched
 
@@ -45,12 +49,15 @@ class BayesSimConfig:
     finetune: bool  # continue training the previous round's model (false: re-initialise)
     max_components: int  # mixture components kept when combining several real trajectories
     parameter_space: str  # box | probit: what the model is fitted in (distributions/probit.py)
+    combination: str  # several real trajectories: dispersion | product (combination.py)
 
     def validate(self) -> None:
         if self.parameter_space not in ("box", "probit"):
             raise ConfigError(f"parameter_space={self.parameter_space!r} not allowed; allowed: box, probit")
         if self.proposal not in PROPOSALS:
             raise ConfigError(f"proposal={self.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
+        if self.combination not in COMBINATIONS:
+            raise ConfigError(f"combination={self.combination!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
 
@@ -70,6 +77,7 @@ class BayesSim(InferenceMethod):
             Stage("summarize", self.summarize, inputs=("collect",)),
             Stage("fit", self.fit, inputs=("summarize",)),
             Stage("condition", self.condition, inputs=("real", "fit")),
+            Stage("model_check", self.model_check, inputs=("real", "summarize", "condition")),
         ]
 
     # proposals -----------------------------------------------------------------------
@@ -156,14 +164,36 @@ class BayesSim(InferenceMethod):
     def condition(self, ctx: RoundContext) -> dict:
         model = self.comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
-        real = real_trajectories(ctx)
-        x_real = self.comp.summarizer(real.to(self.comp.device)).cpu()
+        x_real = self.comp.summarizer(real_trajectories(ctx).to(self.comp.device)).cpu()
         try:
-            post = condition(model, x_real, self.comp.prior, self.cfg.max_components,
-                             proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit)
+            post, spread = condition(model, x_real, self.comp.prior, self.cfg.max_components,
+                                     proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
+                                     combination=self.cfg.combination)
         except ValueError as exc:
             raise PosteriorError(f"round {ctx.round}: {exc}") from exc
-        return {"posterior": post, "x_real": x_real, "predictive_distance": self._predictive(ctx, post, x_real)}
+        return {"posterior": post, "x_real": x_real, "dispersion": None if spread is None else spread.record()}
+
+    def model_check(self, ctx: RoundContext) -> dict:
+        """Can the simulator, at parameters the posterior allows, reproduce the real data? The summary
+        predictive check, the replayed check (each real trajectory's own start and actions, where the
+        task can restart from an observation) and the mismatch verdict (diagnostics/mismatch.py)."""
+        d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
+        posterior, x_real, real = conditioned["posterior"], conditioned["x_real"], real_trajectories(ctx)
+        check = None
+        if d.replay_sims and self.comp.task.state_from_observation(real.states[:1, 0].double().numpy()) is not None:
+            prior = self.comp.prior
+            check = replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real,
+                                   posterior, prior, num=d.replay_sims, seed=ctx.seed, alpha=d.mismatch_alpha,
+                                   max_distance_ratio=d.mismatch_distance_ratio)
+            ctx.tb.replays(ctx.round, check, list(self.comp.task.obs_names))
+        elif d.replay_sims:
+            log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
+                     ctx.round, self.comp.task.name)
+        outside = summaries_outside(x_real, ctx.output("summarize")["x"])
+        replay_record = None if check is None else check.record()
+        return {"predictive_distance": self._predictive(ctx, posterior, x_real), "replay_check": replay_record,
+                "mismatch": mismatch_report(ctx.round, outside, replay_record, conditioned["dispersion"],
+                                            d.mismatch_alpha)}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
         num = self.comp.rc.diagnostics.predictive_sims
@@ -196,7 +226,8 @@ class BayesSim(InferenceMethod):
             "coverage": fitted["coverage"],
             "held_out_gain": fitted["held_out_gain"],
             "guard": fitted["guard"],
-            "predictive_distance": ctx.output("condition")["predictive_distance"],
+            "dispersion": ctx.output("condition")["dispersion"],
+            **{k: v for k, v in ctx.output("model_check").items() if k != "seconds"},
         }
 
 

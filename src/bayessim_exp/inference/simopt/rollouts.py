@@ -15,20 +15,11 @@ import logging
 import numpy as np
 import torch
 
+from ...policies import OpenLoopPolicy
 from ...sim.pool import SimulatorPool
 from ...sim.trajectories import Trajectories
 
 log = logging.getLogger(__name__)
-
-
-class ReplayPolicy:
-    """Recorded actions [n, T, A] played open loop, one row per simulation slot."""
-
-    def __init__(self, actions: torch.Tensor):
-        self.actions = actions
-
-    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
-        return self.actions[:, t].to(obs.device)
 
 
 def simulate_like_real(sims: SimulatorPool, params: torch.Tensor, real: Trajectories, policy, rollout: str,
@@ -48,7 +39,7 @@ def simulate_like_real(sims: SimulatorPool, params: torch.Tensor, real: Trajecto
     parts = []
     for k, lo in enumerate(range(0, len(rows), sims.chunk)):
         block = slice(lo, lo + sims.chunk)
-        acting = ReplayPolicy(actions[block]) if rollout == "recorded" else policy
+        acting = OpenLoopPolicy(actions[block]) if rollout == "recorded" else policy
         part_state = None if state is None else {f: v[block] for f, v in state.items()}
         traj = sims.get(len(rows[block])).rollout(rows[block], acting, real.horizon, int(seeds[k]), state=part_state)
         obs = traj.states.double().cpu()

@@ -75,7 +75,8 @@ def test_a_job_killed_while_fitting_resumes_and_matches_a_run_never_killed(tmp_p
     resumed = cli(*args, f"hydra.run.dir={run_dir}", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     assert "round 1: summarize done" not in resumed.stderr + resumed.stdout  # not redone
-    assert all(p.stat().st_mtime_ns == t for p, t in finished.items())  # finished artifacts untouched
+    # finished artifacts untouched, but for the transient collect.pt, which shrinks to its timing once summarized
+    assert all(p.stat().st_mtime_ns == t for p, t in finished.items() if p.name != "collect.pt")
     expected = json.loads((tmp_path / "reference" / "results.json").read_text())
     got = json.loads((run_dir / "results.json").read_text())
     assert len(got["rounds"]) == 2

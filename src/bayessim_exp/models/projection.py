@@ -22,7 +22,7 @@ class RidgeSystem:
     (a fold's Gram matrix is subtracted rather than recomputed: thousands of features are common)."""
 
     def __init__(self, z: torch.Tensor, y: torch.Tensor):
-        self.design = torch.cat([z.double(), torch.ones(len(z), 1, dtype=torch.float64)], 1)
+        self.design = torch.cat([z.double(), torch.ones(len(z), 1, dtype=torch.float64, device=z.device)], 1)
         self.y = y.double()
         self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
 
@@ -32,7 +32,7 @@ class RidgeSystem:
         if leave_out is not None:
             d = self.design[leave_out]
             gram, moment = gram - d.T @ d, moment - d.T @ self.y[leave_out]
-        reg = penalty * torch.ones(gram.shape[0], dtype=gram.dtype)
+        reg = penalty * torch.ones(gram.shape[0], dtype=gram.dtype, device=gram.device)
         reg[-1] = 0.0
         return torch.linalg.solve(gram + torch.diag(reg), moment)
 
@@ -55,7 +55,7 @@ class RidgeProjection(nn.Module):
     def fit(self, x: torch.Tensor, theta: torch.Tensor, seed: int) -> torch.Tensor:
         """Fit on all pairs; return the out-of-fold predictions for the same pairs [N, D]."""
         system = RidgeSystem(x, theta)
-        folds = torch.randperm(len(x), generator=torch.Generator().manual_seed(seed)) % _FOLDS
+        folds = (torch.randperm(len(x), generator=torch.Generator().manual_seed(seed)) % _FOLDS).to(x.device)
         held = folds == 0
         errors = [float((system.y[held] - system.predict(held, system.solve(p, held))).pow(2).mean()) for p in _PENALTIES]
         penalty = _PENALTIES[min(range(len(errors)), key=errors.__getitem__)]

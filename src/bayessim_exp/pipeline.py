@@ -132,7 +132,8 @@ class Components:
     x_dim: int
 
     def policy(self, cfg: DictConfig, seed: int):
-        return registry.build("policy", cfg.policy, action_dim=self.task.action_dim, seed=seed)
+        return registry.build("policy", cfg.policy, action_dim=self.task.action_dim, seed=seed,
+                              control_dt=self.task.cfg.control_dt, actor=None)
 
     def model(self, cfg: DictConfig):
         deps: dict[str, Any] = {"theta_dim": self.task.spec.dim, "x_dim": self.x_dim}
@@ -154,7 +155,7 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     x_dim = summarizer.output_dim(task.obs_dim, task.action_dim, rc.collect.horizon)
     registry.parse_params("policy", cfg.policy)
     registry.parse_params("model", cfg.model)
-    registry.build("rl", cfg.rl)
+    registry.build("rl", cfg.rl, task=task)
     real = registry.build("real", cfg.real, task=task, sims=sims)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)

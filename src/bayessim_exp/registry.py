@@ -47,6 +47,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.real",
     "bayessim_exp.sim.native",
     "bayessim_exp.rl.none",
+    "bayessim_exp.rl.config",
 )
 
 

@@ -53,7 +53,7 @@ def main() -> None:
         row = {"seed": seed, "bayessim_seconds": round(bayessim_seconds, 1),
                "posterior_mean": posterior.moments()[0].tolist(), "posterior_std": posterior.moments()[1].tolist()}
         for train_on in ("posterior", "prior", "nominal"):
-            component = registry.build("rl", api.compose(overrides + [f"rl.train_on={train_on}"]).rl, task=comp.task)
+            component = registry.build("rl", api.compose(overrides + [f"rl.train_on={train_on}"]).rl, task=comp.task, device="cpu")
             ctx = StandaloneRounds(comp.task, comp.sims, comp.prior, posterior, seed=seed)
             for stage in component.stages():
                 ctx.run(stage)

@@ -155,7 +155,7 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     x_dim = summarizer.output_dim(task.obs_dim, task.action_dim, rc.collect.horizon)
     registry.parse_params("policy", cfg.policy)
     registry.parse_params("model", cfg.model)
-    registry.build("rl", cfg.rl, task=task)
+    registry.build("rl", cfg.rl, task=task, device=rc.device)
     real = registry.build("real", cfg.real, task=task, sims=sims)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)

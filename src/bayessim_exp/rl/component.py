@@ -56,8 +56,8 @@ class StageSpec(NamedTuple):
 
 
 class PPOComponent:
-    def __init__(self, cfg: PPOComponentConfig, task: Task):
-        self.cfg, self.task = cfg, task
+    def __init__(self, cfg: PPOComponentConfig, task: Task, device: str):
+        self.cfg, self.task, self.device = cfg, task, torch.device(device)
         self.train_cfg = cfg.train
 
     def stages(self) -> list[StageSpec]:
@@ -65,7 +65,7 @@ class PPOComponent:
                 StageSpec("evaluate", self.evaluate, ("train_policy",))]
 
     def trainer(self, state: dict | None = None) -> PPOTrainer:
-        trainer = PPOTrainer(self.train_cfg, self.task.obs_dim, self.task.action_dim)
+        trainer = PPOTrainer(self.train_cfg, self.task.obs_dim, self.task.action_dim, self.device)
         if state is not None:
             trainer.load_state_dict(state)
         return trainer

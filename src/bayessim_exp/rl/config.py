@@ -67,7 +67,8 @@ class PPOComponentConfig:
 
 
 @register("rl", "ppo", PPOComponentConfig)
-def ppo_component(cfg: PPOComponentConfig, task, **_: object):
+def ppo_component(cfg: PPOComponentConfig, task, device: str, **_: object):
+    """device: where the networks train (the run's `device`; the simulator's device for MJX on a GPU)."""
     from .component import PPOComponent
 
-    return PPOComponent(cfg, task)
+    return PPOComponent(cfg, task, device)

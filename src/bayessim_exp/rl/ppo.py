@@ -25,9 +25,9 @@ from .networks import Agent
 class PPOTrainer:
     """Networks, optimiser and loss of one policy; `train` improves it on an environment."""
 
-    def __init__(self, cfg: PPOConfig, obs_dim: int, action_dim: int):
+    def __init__(self, cfg: PPOConfig, obs_dim: int, action_dim: int, device: torch.device | str = "cpu"):
         self.cfg = cfg
-        self.agent = Agent(obs_dim, action_dim, cfg.hidden, cfg.obs_clip, cfg.init_log_std)
+        self.agent = Agent(obs_dim, action_dim, cfg.hidden, cfg.obs_clip, cfg.init_log_std).to(device)
         self.loss = ClipPPOLoss(self.agent.actor, self.agent.critic, clip_epsilon=cfg.clip_epsilon,
                                 entropy_coeff=cfg.entropy_coeff, critic_coeff=cfg.critic_coeff,
                                 normalize_advantage=True, loss_critic_type="smooth_l1")
@@ -44,7 +44,7 @@ class PPOTrainer:
         return {"agent": self.agent.state_dict(), "optim": self.optim.state_dict(), "steps_done": self.steps_done}
 
     def load_state_dict(self, state: dict) -> None:
-        self.agent.load_state_dict(state["agent"])
+        self.agent.load_state_dict(state["agent"])  # moved to the agent's device
         self.optim.load_state_dict(state["optim"])
         self.steps_done = state["steps_done"]
 
@@ -54,7 +54,8 @@ class PPOTrainer:
         env = TransformedEnv(env, RewardSum())
         batch_frames = env.batch_size.numel() * cfg.rollout_steps
         total = cfg.total_steps // batch_frames * batch_frames
-        collector = Collector(env, self.agent.actor, frames_per_batch=batch_frames, total_frames=total)
+        collector = Collector(env, self.agent.actor, frames_per_batch=batch_frames, total_frames=total,
+                              auto_register_policy_transforms=False)  # a feed-forward policy needs none
         collector.set_seed(seed)
         curve: dict[str, list[float]] = {"steps": [], "episode_return": [], "seconds": [], "update_seconds": []}
         t0 = time.perf_counter()

@@ -1,7 +1,7 @@
 """The RL stages outside the pipeline: rounds whose posterior you hand in, outputs kept in memory.
 
     ctx = StandaloneRounds(task, sims, posterior=api.load_run(run_dir).posterior(), seed=0)
-    component = registry.build("rl", cfg.rl, task=task)
+    component = registry.build("rl", cfg.rl, task=task, device="cpu")
     for stage in component.stages():
         ctx.run(stage)
     component.record(ctx)

@@ -28,6 +28,7 @@ class PPOConfig:
     gae_lambda: float
     clip_epsilon: float
     entropy_coeff: float
+    reward_scale: float  # rewards are multiplied by this for the critic and advantages (returns reported unscaled)
     critic_coeff: float
     max_grad_norm: float
     hidden: list[int]

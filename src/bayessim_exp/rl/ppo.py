@@ -78,6 +78,7 @@ class PPOTrainer:
 
     def _update(self, batch, seed: int) -> dict:
         cfg = self.cfg
+        batch["next", "reward"] = batch["next", "reward"] * cfg.reward_scale  # value targets of order one
         with torch.no_grad():
             self.advantage(batch)
         flat = batch.reshape(-1)

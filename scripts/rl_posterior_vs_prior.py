@@ -27,7 +27,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--iterations", type=int, default=2, help="BayesSim rounds before PPO")
     parser.add_argument("--episodes", type=int, default=32, help="surrogate-real evaluation episodes")
-    parser.add_argument("--overrides", nargs="*", default=[], help="more Hydra overrides (e.g. rl.train.total_steps=...)")
+    parser.add_argument("--overrides", nargs="*", default=[], help="more Hydra overrides for BayesSim")
+    parser.add_argument("--rl-overrides", nargs="*", default=[], help="more overrides for PPO, e.g. rl.train.total_steps=...")
     parser.add_argument("--out", default="docs/figures/rl_posterior_vs_prior")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -41,11 +42,11 @@ def main() -> None:
     results: dict = {"task": args.task, "real": args.real, "iterations": args.iterations, "runs": []}
     for seed in args.seeds:
         overrides = [f"task={args.task}", f"seed={seed}", f"iterations={args.iterations}", "logging.progress=false",
-                     "diagnostics.predictive_sims=0", "rl=ppo", f"rl.evaluate.episodes={args.episodes}",
-                     "rl.evaluate.video_steps=0", *[f"task.real_params.{kv}" for kv in args.real], *args.overrides]
+                     "diagnostics.predictive_sims=0", *[f"task.real_params.{kv}" for kv in args.real], *args.overrides]
+        rl_overrides = ["rl=ppo", f"rl.evaluate.episodes={args.episodes}", "rl.evaluate.video_steps=0", *args.rl_overrides]
         run_dir = Path("outputs") / "rl_posterior_vs_prior" / f"{args.task}_seed{seed}"
         t0 = time.perf_counter()
-        api.run(overrides, out_dir=run_dir)
+        api.run(overrides, out_dir=run_dir)  # BayesSim only (rl=none): PPO settings do not touch its run dir
         bayessim_seconds = time.perf_counter() - t0
         posterior = api.load_run(run_dir).posterior()
         cfg = api.compose(overrides)
@@ -53,7 +54,8 @@ def main() -> None:
         row = {"seed": seed, "bayessim_seconds": round(bayessim_seconds, 1),
                "posterior_mean": posterior.moments()[0].tolist(), "posterior_std": posterior.moments()[1].tolist()}
         for train_on in ("posterior", "prior", "nominal"):
-            component = registry.build("rl", api.compose(overrides + [f"rl.train_on={train_on}"]).rl, task=comp.task, device="cpu")
+            rl_cfg = api.compose(overrides + rl_overrides + [f"rl.train_on={train_on}"]).rl
+            component = registry.build("rl", rl_cfg, task=comp.task, device="cpu")
             ctx = StandaloneRounds(comp.task, comp.sims, comp.prior, posterior, seed=seed)
             for stage in component.stages():
                 ctx.run(stage)

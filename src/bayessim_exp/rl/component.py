@@ -61,7 +61,8 @@ class PPOComponent:
         self.train_cfg = cfg.train
 
     def stages(self) -> list[StageSpec]:
-        return [StageSpec("train_policy", self.train_policy, ()),
+        needs = ("condition",) if self.cfg.train_on == "posterior" else ()  # the stage that gives the posterior
+        return [StageSpec("train_policy", self.train_policy, needs),
                 StageSpec("evaluate", self.evaluate, ("train_policy",))]
 
     def trainer(self, state: dict | None = None) -> PPOTrainer:

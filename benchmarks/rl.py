@@ -81,6 +81,7 @@ def main() -> None:
     ap.add_argument("--overrides", nargs="*", default=[], help="Hydra overrides, e.g. sim=mjx device=cuda")
     args = ap.parse_args()
     torch.set_num_threads(1)
+    torch.manual_seed(0)  # network initialisation
     rows = [throughput(task, args.steps, args.overrides) for task in args.tasks]
     print(f"overrides: {' '.join(args.overrides) or '(none)'}; torch threads 1")
     print("| task | envs | steps | Simulator.rollout, random actions (baseline) | Collector + actor | PPO incl. updates "

@@ -29,8 +29,8 @@ import torch
 from omegaconf import OmegaConf
 
 import bayessim_exp
-from bayessim_exp.models.correction import posterior
-from bayessim_exp.priors import BoxUniform, GaussianPrior
+from bayessim_exp.distributions.independent import BoxUniform, GaussianPrior
+from bayessim_exp.inference.bayessim.correction import posterior
 from bayessim_exp.registry import build
 
 REF_DRAWS = 2000

@@ -20,12 +20,13 @@ import torch
 
 
 def components(task: str, overrides: list[str]):
-    from bayessim_exp import api, registry
-    from bayessim_exp.pipeline import build_components, check_run_config
+    from bayessim_exp import api
+    from bayessim_exp.components import build_components
+    from bayessim_exp.run_config import check_run_config
 
     cfg = api.compose([f"task={task}", "rl=ppo", "rl.train_on=nominal", *overrides])
     comp = build_components(cfg, check_run_config(cfg))
-    return comp, registry.build("rl", cfg.rl, task=comp.task, device=cfg.device)
+    return comp, comp.rl
 
 
 def throughput(task: str, steps: int, overrides: list[str]) -> dict:

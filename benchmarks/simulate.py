@@ -15,14 +15,13 @@ import numpy as np
 
 from bayessim_exp import api, registry
 from bayessim_exp.policies import RandomPolicy
-from bayessim_exp.sim.native import NativeConfig, NativeSimulator
 
 
 def batched(task, envs, horizon, nthread):
     params = np.repeat(task.real_values[None], envs, 0)
-    sim = NativeSimulator(task, envs, NativeConfig(nthread=nthread))
+    sim = registry.build("sim", {"name": "native", "nthread": nthread})(task, envs)
     t0 = time.perf_counter()
-    sim.rollout(params, RandomPolicy(task.action_dim, 0), horizon, np.random.default_rng(0))
+    sim.rollout(params, RandomPolicy(task.action_dim, 0), horizon, seed=0)
     return envs * horizon / (time.perf_counter() - t0)
 
 

@@ -80,7 +80,7 @@ def main() -> None:
         dim = summarizer.output_dim(args.state_dim, args.action_dim, args.horizon)
         options = ", ".join(f"{k}={v}" for k, v in params.items())
         with torch.no_grad():
-            s = seconds(lambda: summarizer(traj), args.repeats, args.device)
+            s = seconds(lambda f=summarizer: f(traj), args.repeats, args.device)
         ratio = ""
         if name == "signatory":  # the torch row follows the pysiglib row with the same other options
             same = ", ".join(f"{k}={v}" for k, v in params.items() if k != "backend")
@@ -92,7 +92,7 @@ def main() -> None:
         if hasattr(summarizer, "embedding"):
             summarizer.embedding.to(args.device)
             with torch.no_grad():
-                s = seconds(lambda: summarizer.embedding(summarizer(traj)), args.repeats, args.device)
+                s = seconds(lambda f=summarizer: f.embedding(f(traj)), args.repeats, args.device)
             print(f"| {name} + embedding forward | {options} | {summarizer.embedding_dim} | {s * scale:.4f} | |", flush=True)
 
 

@@ -25,7 +25,7 @@ def main() -> None:
     parser.add_argument("--task", default="Pendulum")
     parser.add_argument("--real", nargs="*", default=["mass=1.8", "length=0.9"], help="surrogate real name=value")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--iterations", type=int, default=2, help="BayesSim rounds before PPO")
+    parser.add_argument("--rounds", type=int, default=2, help="BayesSim rounds before PPO")
     parser.add_argument("--episodes", type=int, default=32, help="surrogate-real evaluation episodes")
     parser.add_argument("--overrides", nargs="*", default=[], help="more Hydra overrides for BayesSim")
     parser.add_argument("--rl-overrides", nargs="*", default=[], help="more overrides for PPO, e.g. rl.train.total_steps=...")
@@ -33,15 +33,16 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    from bayessim_exp import api, registry
-    from bayessim_exp.pipeline import build_components, check_run_config
+    from bayessim_exp import api
+    from bayessim_exp.components import build_components
     from bayessim_exp.rl.standalone import StandaloneRounds
+    from bayessim_exp.run_config import check_run_config
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    results: dict = {"task": args.task, "real": args.real, "iterations": args.iterations, "runs": []}
+    results: dict = {"task": args.task, "real": args.real, "rounds": args.rounds, "runs": []}
     for seed in args.seeds:
-        overrides = [f"task={args.task}", f"seed={seed}", f"iterations={args.iterations}", "logging.progress=false",
+        overrides = [f"task={args.task}", f"seed={seed}", f"rounds={args.rounds}", "logging.progress=false",
                      "diagnostics.predictive_sims=0", *[f"task.real_params.{kv}" for kv in args.real], *args.overrides]
         rl_overrides = ["rl=ppo", f"rl.evaluate.episodes={args.episodes}", "rl.evaluate.video_steps=0", *args.rl_overrides]
         run_dir = Path("outputs") / "rl_posterior_vs_prior" / f"{args.task}_seed{seed}"
@@ -49,17 +50,13 @@ def main() -> None:
         api.run(overrides, out_dir=run_dir)  # BayesSim only (rl=none): PPO settings do not touch its run dir
         bayessim_seconds = time.perf_counter() - t0
         posterior = api.load_run(run_dir).posterior()
-        cfg = api.compose(overrides)
-        comp = build_components(cfg, check_run_config(cfg))
         row = {"seed": seed, "bayessim_seconds": round(bayessim_seconds, 1),
                "posterior_mean": posterior.moments()[0].tolist(), "posterior_std": posterior.moments()[1].tolist()}
         for train_on in ("posterior", "prior", "nominal"):
-            rl_cfg = api.compose(overrides + rl_overrides + [f"rl.train_on={train_on}"]).rl
-            component = registry.build("rl", rl_cfg, task=comp.task, device="cpu")
-            ctx = StandaloneRounds(comp.task, comp.sims, comp.prior, posterior, seed=seed)
-            for stage in component.stages():
-                ctx.run(stage)
-            row[train_on] = component.record(ctx)
+            cfg = api.compose(overrides + rl_overrides + [f"rl.train_on={train_on}"])
+            comp = build_components(cfg, check_run_config(cfg))
+            ctx = StandaloneRounds(comp, posterior, run_dir / f"ppo_{train_on}").run_round(1)
+            row[train_on] = comp.rl.record(ctx)
             print(f"seed {seed} {train_on:>9s}: surrogate real return {row[train_on]['surrogate_real_return']['mean']:.1f} "
                   f"({row[train_on]['rl_training']['seconds']:.0f} s of PPO)", flush=True)
         results["runs"].append(row)

@@ -1,34 +1,60 @@
-"""`python -m bayessim_exp [overrides]`: compose the Hydra config and run the pipeline."""
+"""`python -m bayessim_exp [overrides]`: compose the Hydra config and run the pipeline.
 
+A single run that fails prints the error and exits 2. In --multirun every job runs: a failing job
+writes `error.txt` into its run dir, and the sweep exits 1 at the end naming the failed jobs. The
+task function returns the last round's log-density gain at the true parameters (NaN when unknown
+or failed), so Hydra sweepers such as Optuna can optimise it.
+"""
+
+import math
 import sys
 
 import hydra
 from omegaconf import DictConfig
 
+from . import job_failures
+
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="config")
-def _app(cfg: DictConfig) -> None:
+def _app(cfg: DictConfig) -> float:
     from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
 
     from .errors import ConfigError, DataError, PosteriorError, TrainingError
     from .pipeline import run
 
+    hydra_cfg = HydraConfig.get()
+    out_dir = hydra_cfg.runtime.output_dir
     try:
-        results = run(cfg, HydraConfig.get().runtime.output_dir)
-    except (ConfigError, DataError, PosteriorError, TrainingError) as exc:
+        results = run(cfg, out_dir)
+    except Exception as exc:  # noqa: BLE001 - every failure is reported; a sweep must go on
+        expected = isinstance(exc, (ConfigError, DataError, PosteriorError, TrainingError))
+        job_failures.record_failure(out_dir, exc, expected)
+        if hydra_cfg.mode == RunMode.MULTIRUN:
+            print(f"error in job {hydra_cfg.job.num} ({out_dir}): {exc}", file=sys.stderr)
+            return math.nan
+        if not expected:
+            raise
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
     last = results["rounds"][-1]
-    print(f"{results['run_name']}: {len(results['rounds'])} rounds -> {HydraConfig.get().runtime.output_dir}")
+    print(f"{results['run_name']}: {len(results['rounds'])} rounds -> {out_dir}")
     for name in results["param_names"][:8]:
         print(f"  {name:>20s}: {last['posterior_mean'][name]:.4g} +- {last['posterior_std'][name]:.3g}"
               + (f"  (true {results['true_params'][name]:.4g})" if results["true_params"] else ""))
-    if last["log_prob_gain"] is not None:
-        print(f"  log p(true | real) - log p(true) = {last['log_prob_gain']:.2f} nats")
+    gain = last["log_prob_gain"]
+    if gain is not None:
+        print(f"  log p(true | real) - log p(true) = {gain:.2f} nats")
+    return math.nan if gain is None else float(gain)
 
 
 def main() -> None:
     _app()
+    if job_failures.failed:
+        print(f"{len(job_failures.failed)} job(s) failed (their error.txt says why):", file=sys.stderr)
+        for job_dir in job_failures.failed:
+            print(f"  {job_dir}", file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == "__main__":

@@ -20,13 +20,13 @@ import torch
 from omegaconf import OmegaConf
 
 from . import registry
-from .inference.bayessim import condition
-from .models.mixture import TruncatedMixture
-from .priors import BoxUniform, GaussianPrior, LogUniform
+from .distributions.base import ParameterDistribution
+from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
+from .inference.bayessim.condition import condition
 
 __all__ = ["BoxUniform", "GaussianPrior", "LogUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
 
-CONF_DIR = Path(__file__).parent / "conf"
+CONF_DIR = registry.CONF_DIR
 
 
 @dataclasses.dataclass
@@ -49,25 +49,29 @@ class FittedPosterior:
                     "prior": self.prior}, path)  # priors are small torch distributions: pickled whole
 
     @classmethod
-    def load(cls, path: str | Path) -> "FittedPosterior":
+    def load(cls, path: str | Path) -> FittedPosterior:
         d = torch.load(path, weights_only=False)
-        model = registry.build("model", {"name": d["name"], **d["config"]}, theta_dim=d["theta_dim"], x_dim=d["x_dim"])
+        model = registry.build("model", {**d["config"], "name": d["name"]},
+                               theta_dim=d["theta_dim"], x_dim=d["x_dim"])
         model.load_state_dict(d["state"])
         return cls(d["name"], model, d["prior"], d["config"], d["history"])
 
 
 def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=None, seed: int = 0,
                         **cfg: Any) -> FittedPosterior:
-    """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg as in conf/model/<name>.yaml."""
+    """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg overrides the defaults in
+    conf/model/<name>.yaml."""
     theta, x = torch.as_tensor(theta), torch.as_tensor(x)
-    model = registry.build("model", {"name": name, **cfg}, theta_dim=theta.shape[1], x_dim=x.shape[1])
+    model = registry.build("model", {**cfg, "name": name},
+                           theta_dim=theta.shape[1], x_dim=x.shape[1])
     history = model.fit(theta, x, seed=seed, label=name)
     return FittedPosterior(name, model, prior, cfg, history)
 
 
 def compose(overrides: list[str] | None = None):
     """The config the CLI would compose from these overrides."""
-    from hydra import compose as hydra_compose, initialize_config_dir
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
 
     with initialize_config_dir(config_dir=str(CONF_DIR.resolve()), version_base="1.3"):
         return hydra_compose(config_name="config", overrides=list(overrides or []))
@@ -89,14 +93,14 @@ class Run:
     results: dict
     config: Any
 
-    def posterior(self, round_index: int | None = None):
-        r = round_index or len(self.results["rounds"])
-        state = torch.load(self.path / f"round_{r:03d}" / "condition.pt", weights_only=False)["posterior"]
-        if state is not None:
-            return TruncatedMixture.from_state_dict(state)
-        from .pipeline import Pipeline  # flows and importance-weighted posteriors: rebuilt from the artifacts
+    def posterior(self, round_index: int | None = None) -> ParameterDistribution:
+        """The distribution a finished round ended with (the last round by default)."""
+        from .pipeline import Pipeline
+        from .stages import RoundContext
 
-        return Pipeline(self.config, self.path).posterior(r)
+        r = round_index or len(self.results["rounds"])
+        pipeline = Pipeline(self.config, self.path)
+        return pipeline.comp.method.posterior(RoundContext(pipeline.comp, pipeline.run_dir, r, pipeline.rc.seed, None))
 
 
 def load_run(path: str | Path) -> Run:

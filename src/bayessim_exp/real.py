@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+
 import numpy as np
 import torch
 
@@ -25,7 +26,7 @@ from .tasks.base import Task
 
 @dataclasses.dataclass
 class SurrogateConfig:
-    per_round: int = 1
+    per_round: int
 
     def validate(self) -> None:
         if self.per_round < 1:
@@ -34,7 +35,7 @@ class SurrogateConfig:
 
 @dataclasses.dataclass
 class FileConfig:
-    path: str = "???"
+    path: str
 
 
 class SurrogateReal:

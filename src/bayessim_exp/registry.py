@@ -15,14 +15,17 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import importlib
-from typing import Any, Callable
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from .errors import ConfigError
 
-GROUPS = ("task", "prior", "policy", "summarizer", "model", "rl", "sim", "real")
+CONF_DIR = Path(__file__).parent / "conf"  # the package's config (a link to conf/ in a source checkout)
+GROUPS = ("task", "prior", "method", "policy", "summarizer", "model", "rl", "sim", "real")
 
 _BUILTIN_MODULES = (
     "bayessim_exp.tasks.pendulum",
@@ -45,6 +48,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.mdrff",
     "bayessim_exp.models.flow",
     "bayessim_exp.real",
+    "bayessim_exp.inference.bayessim.method",
     "bayessim_exp.sim.native",
     "bayessim_exp.rl.none",
     "bayessim_exp.rl.config",
@@ -118,6 +122,8 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
         raise ConfigError(f"{group}: config has no 'name' key; allowed names: {', '.join(names(group))}")
     name = container.pop("name")
     spec = entry(group, name).params
+    # keys left out take the option's defaults from its YAML, the one place they are written
+    container = {**{k: v for k, v in option_defaults(group, name).items() if k != "name"}, **container}
     allowed = [f.name for f in dataclasses.fields(spec)]
     unknown = [k for k in container if k not in allowed]
     if unknown:
@@ -127,6 +133,10 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
         raise ConfigError(
             f"{group}.{key} is not a parameter of {group}={name}{hint}; allowed keys: {', '.join(allowed)}"
         )
+    missing = [f.name for f in dataclasses.fields(spec) if f.name not in container
+               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if missing:
+        raise ConfigError(f"{group}={name} has no value for {', '.join(missing)}")
     try:
         typed = OmegaConf.merge(OmegaConf.structured(spec), container)
         params = OmegaConf.to_object(typed)
@@ -145,6 +155,16 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
         except ConfigError as exc:
             raise ConfigError(f"{group}={name}: {exc}") from None
     return name, params
+
+
+def option_defaults(group: str, name: str) -> dict:
+    """The defaults of a built-in option: its YAML under the package's conf/ (empty if it has none)."""
+    path = CONF_DIR / group / f"{name}.yaml"
+    if not path.is_file():
+        return {}
+    values = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+    values.pop("defaults", None)
+    return values
 
 
 def build(group: str, cfg: DictConfig | dict, **deps: Any) -> Any:

@@ -4,7 +4,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -13,10 +12,8 @@ pytestmark = pytest.mark.slow
 
 def cli(*args, cwd):
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "bayessim_exp", *args], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=300)
-    return proc, time.perf_counter() - t0
+    return subprocess.run([sys.executable, "-m", "bayessim_exp", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=600)
 
 
 @pytest.mark.parametrize("args, expected", [
@@ -27,23 +24,26 @@ def cli(*args, cwd):
     (["collect.horizon=ten"], ["collect.horizon", "'ten'"]),
 ])
 def test_bad_config_fails_fast_with_the_allowed_values(tmp_path, args, expected):
-    proc, seconds = cli(*args, f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
+    proc = cli(*args, f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
     assert proc.returncode != 0
     for text in expected:
         assert text in proc.stderr, proc.stderr
-    assert seconds < 10
-    assert not list(tmp_path.glob("run/round_*"))  # nothing was simulated
+    assert not list(tmp_path.glob("run/round_*"))  # refused before anything was simulated
 
 
-def test_multirun_sweeps_seeds_into_named_run_dirs(tmp_path):
-    proc, _ = cli("--multirun", "debug=smoke", "seed=0,1", "iterations=1", f"hydra.sweep.dir={tmp_path}/sweep",
-                  cwd=tmp_path)
-    assert proc.returncode == 0, proc.stderr
-    runs = sorted(p.name for p in (tmp_path / "sweep").iterdir() if p.is_dir() and p.name[0].isdigit())
-    assert runs == ["0_Pendulum_mdnn_start_random_seed0", "1_Pendulum_mdnn_start_random_seed1"]
-    for name in runs:
-        results = json.loads((tmp_path / "sweep" / name / "results.json").read_text())
-        assert results["seed"] == int(name[-1]) and len(results["rounds"]) == 1
+def test_multirun_goes_on_past_a_failing_job_and_names_it(tmp_path):
+    proc = cli("--multirun", "debug=smoke", "model.components=0,3", "seed=1", "rounds=1",
+                  f"hydra.sweep.dir={tmp_path}/sweep", cwd=tmp_path)
+    sweep = tmp_path / "sweep"
+    runs = sorted(p.name for p in sweep.iterdir() if p.is_dir() and p.name[0].isdigit())
+    assert runs == ["0_Pendulum_bayessim_mdnn_start_random_seed1", "1_Pendulum_bayessim_mdnn_start_random_seed1"]
+    failed, finished = sweep / runs[0], sweep / runs[1]
+    assert "components must be an integer >= 1, got 0" in (failed / "error.txt").read_text()
+    assert not (failed / "results.json").exists()
+    results = json.loads((finished / "results.json").read_text())
+    assert results["seed"] == 1 and len(results["rounds"]) == 1
+    assert proc.returncode == 1
+    assert "1 job(s) failed" in proc.stderr and str(failed) in proc.stderr
 
 
 PLUGIN = '''
@@ -78,8 +78,8 @@ def test_a_component_registered_outside_the_package(tmp_path):
     (tmp_path / "mylab" / "final.py").write_text(PLUGIN)
     (tmp_path / "conf" / "summarizer").mkdir(parents=True)
     (tmp_path / "conf" / "summarizer" / "final_state.yaml").write_text("# the last state\nname: final_state\n")
-    proc, _ = cli("plugins=[mylab.final]", f"hydra.searchpath=[file://{tmp_path}/conf]", "summarizer=final_state",
-                  "debug=smoke", "iterations=1", f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
+    proc = cli("plugins=[mylab.final]", f"hydra.searchpath=[file://{tmp_path}/conf]", "summarizer=final_state",
+                  "debug=smoke", "rounds=1", f"hydra.run.dir={tmp_path}/run", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     results = json.loads((tmp_path / "run" / "results.json").read_text())
-    assert results["summarizer"] == "final_state" and results["run_name"] == "Pendulum_mdnn_final_state_random_seed0"
+    assert results["summarizer"] == "final_state" and results["run_name"] == "Pendulum_bayessim_mdnn_final_state_random_seed0"

@@ -7,10 +7,10 @@ import pytest
 import torch
 
 from bayessim_exp import api, registry
+from bayessim_exp.inference.bayessim.method import BayesSim
 from bayessim_exp.pipeline import Pipeline
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.real import save_trajectories
-from bayessim_exp.sim.native import NativeSimulator
 
 pytestmark = pytest.mark.slow
 
@@ -22,18 +22,17 @@ SMALL_BUDGET = ["collect.horizon=20", "diagnostics.predictive_sims=0"]
 def test_killed_run_resumes_from_its_last_finished_stage(compose, tmp_path, monkeypatch):
     cfg = compose(SMOKE)
     Pipeline(cfg, tmp_path).run(stop_after=(2, "fit"))  # as if killed right after round 2's fit
-    assert (tmp_path / "round_002" / "fit.pt").is_file() and not (tmp_path / "round_002" / "real.pt").exists()
+    assert (tmp_path / "round_002" / "fit.pt").is_file() and not (tmp_path / "round_002" / "condition.pt").exists()
     finished = {p: p.stat().st_mtime_ns for p in tmp_path.glob("round_*/*.pt")}
 
     calls = []
-    for stage in ("collect", "summarize", "fit", "real", "condition"):
-        original = getattr(Pipeline, stage)
-        monkeypatch.setattr(Pipeline, stage, lambda self, r, *a, _f=original, _s=stage: calls.append((_s, r)) or _f(self, r, *a))
+    for owner, stage in [(BayesSim, "collect"), (BayesSim, "summarize"), (BayesSim, "fit"), (BayesSim, "condition"),
+                         (Pipeline, "real"), (Pipeline, "score")]:
+        original = getattr(owner, stage)
+        monkeypatch.setattr(owner, stage, lambda self, ctx, _f=original, _s=stage: calls.append((_s, ctx.round)) or _f(self, ctx))
     results = Pipeline(cfg, tmp_path).run()
-    # only round 2's unfinished stages ran again; round 1's posterior is rebuilt from its
-    # artifacts (no stage reruns) because round 2's proposal and correction need it
-    assert [c for c in calls if c[1] == 2] == [("real", 2), ("condition", 2)]
-    assert set(calls) - {("real", 2), ("condition", 2)} <= {("condition", 1)}
+    # only round 2's unfinished stages ran again; round 1's posterior (round 2's proposal) is read from its artifact
+    assert calls == [("condition", 2), ("score", 2)]
     assert all(p.stat().st_mtime_ns == t for p, t in finished.items())  # finished artifacts untouched
     assert [r["round"] for r in results["rounds"]] == [1, 2]
     assert json.loads((tmp_path / "results.json").read_text())["rounds"][-1]["round"] == 2
@@ -55,19 +54,19 @@ def test_results_and_tensorboard_are_written(compose, tmp_path):
     for key in ("posterior_mean", "posterior_std", "log_prob_true_posterior", "log_prob_true_prior", "diverged",
                 "sim_trajectories", "train_loss", "val_loss", "seconds"):
         assert key in last
-    assert set(last["seconds"]) == {"collect", "summarize", "fit", "real", "condition"}
+    assert set(last["seconds"]) == {"real", "collect", "summarize", "fit", "condition", "score"}
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     events = EventAccumulator(str(tmp_path), size_guidance={"images": 0}).Reload()
-    assert {"loss/train", "loss/val"} <= set(events.Tags()["scalars"])
+    assert {"loss/round_1/train", "loss/round_2/val", "log_prob_gain"} <= set(events.Tags()["scalars"])
     assert len(events.Images("posterior")) == 2  # one pair plot per round
     assert "config/text_summary" in events.Tags()["tensors"]
 
 
 def record_pendulum(tmp_path, params, n=2, horizon=30, seed=7):
     task = registry.build("task", api.compose([]).task)
-    sim = NativeSimulator(task, n)
-    traj = sim.rollout(np.repeat(np.array(params)[None], n, 0), RandomPolicy(1, seed), horizon, np.random.default_rng(seed))
+    sim = registry.build("sim", {"name": "native"})(task, n)
+    traj = sim.rollout(np.repeat(np.array(params)[None], n, 0), RandomPolicy(1, seed), horizon, seed)
     path = tmp_path / "robot.npz"
     save_trajectories(path, traj, params, task.spec.names)
     return path
@@ -77,7 +76,7 @@ def test_real_trajectories_from_a_file(compose, tmp_path):
     hidden = [1.6, 0.7]  # not the task's real_params (1.0, 0.5)
     path = record_pendulum(tmp_path, hidden)
     out = tmp_path / "run"
-    api.run(["real=file", f"real.path={path}", "collect.trajectories=3000", "collect.horizon=30", "iterations=1",
+    api.run(["real=file", f"real.path={path}", "collect.trajectories=3000", "collect.horizon=30", "rounds=1",
              "logging.progress=false"], out_dir=out)
     run = api.load_run(out)
     assert run.results["true_params"] == {"mass": 1.6, "length": 0.7}
@@ -109,7 +108,7 @@ def test_posterior_concentrates_on_the_true_parameters(compose, tmp_path, seed):
 def test_later_rounds_draw_from_the_previous_posterior_and_resume(compose, tmp_path):
     """proposal=gaussian: round 2 simulates from round 1's posterior moment-matched; a run killed after
     round 2's fit rebuilds that proposal from the artifacts and conditions with the SNPE-A correction."""
-    cfg = compose(SMOKE + ["iterations=3", "proposal=gaussian"])
+    cfg = compose(SMOKE + ["rounds=3", "method.proposal=gaussian"])
     Pipeline(cfg, tmp_path).run(stop_after=(2, "fit"))
     results = Pipeline(cfg, tmp_path).run()
     assert [r["proposal"] for r in results["rounds"]] == ["prior", "gaussian", "gaussian"]
@@ -123,8 +122,8 @@ def test_later_rounds_draw_from_the_previous_posterior_and_resume(compose, tmp_p
 
 @pytest.mark.parametrize("model", ["mdnn", "mdrff", "flow"])
 def test_every_model_runs_sequential_rounds_from_the_previous_posterior(compose, tmp_path, model):
-    results = Pipeline(compose(SMOKE + [f"model={model}", "iterations=3"]), tmp_path).run()
-    default = compose([]).proposal
+    results = Pipeline(compose(SMOKE + [f"model={model}", "rounds=3"]), tmp_path).run()
+    default = compose([]).method.proposal
     assert default != "prior"
     assert [r["proposal"] for r in results["rounds"]] == ["prior", default, default]
     assert all(r["log_prob_true_posterior"] is not None for r in results["rounds"])
@@ -134,8 +133,8 @@ def test_truncation_that_cannot_be_sampled_falls_back_to_the_prior(compose, tmp_
     def refuse(*args, **kwargs):
         raise ValueError("the previous posterior's 99.9% region holds 1e-30 of the prior's mass")
 
-    monkeypatch.setattr("bayessim_exp.pipeline.TruncatedPrior", refuse)
-    results = Pipeline(compose(SMOKE + ["proposal=truncated"]), tmp_path).run()
+    monkeypatch.setattr("bayessim_exp.inference.bayessim.method.TruncatedPrior", refuse)
+    results = Pipeline(compose(SMOKE + ["method.proposal=truncated"]), tmp_path).run()
     assert [r["proposal"] for r in results["rounds"]] == ["prior", "prior"]
     assert "round 2: the previous posterior's 99.9% region" in caplog.text
 

@@ -9,21 +9,21 @@ actions score about -1,300 on the nominal pendulum, PPO with these settings -280
 import pytest
 
 from bayessim_exp import registry
-from bayessim_exp.pipeline import build_components, check_run_config
+from bayessim_exp.components import build_components
 from bayessim_exp.rl.standalone import StandaloneRounds
+from bayessim_exp.run_config import check_run_config
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("task, bar", [("Cartpole", 475.0), ("Pendulum", -400.0)])
-def test_ppo_solves_nominal_task(compose, task, bar):
+def test_ppo_solves_nominal_task(compose, tmp_path, task, bar):
     import torch
 
     torch.set_num_threads(1)
-    cfg = compose([f"task={task}", "rl=ppo", "rl.train_on=nominal", "rl.evaluate.video_steps=0"])
+    spec = registry.build("task", compose([f"task={task}"]).task).spec
+    nominal_is_real = [f"task.real_params.{n}={v}" for n, v in zip(spec.names, spec.nominal)]
+    cfg = compose([f"task={task}", "rl=ppo", "rl.train_on=nominal", "rl.evaluate.video_steps=0", *nominal_is_real])
     comp = build_components(cfg, check_run_config(cfg))
-    component = registry.build("rl", cfg.rl, task=comp.task, device="cpu")
-    ctx = StandaloneRounds(comp.task, comp.sims, comp.prior, seed=0, real_params=comp.task.spec.nominal)
-    for stage in component.stages():
-        ctx.run(stage)
-    ret = component.record(ctx)["surrogate_real_return"]
+    ctx = StandaloneRounds(comp, comp.prior, tmp_path).run_round(1)
+    ret = comp.rl.record(ctx)["surrogate_real_return"]
     assert ret["mean"] >= bar, ret

@@ -11,7 +11,7 @@ pytestmark = pytest.mark.slow
 
 @pytest.mark.parametrize("summarizer", ["start", "waypoints", "corr", "corrdiff", "signatory", "learned"])
 def test_pipeline_runs_with_each_summarizer(compose, tmp_path, summarizer):
-    cfg = compose(["debug=smoke", "logging.progress=false", "iterations=1", f"summarizer={summarizer}"])
+    cfg = compose(["debug=smoke", "logging.progress=false", "rounds=1", f"summarizer={summarizer}"])
     results = Pipeline(cfg, tmp_path).run()
     assert results["summarizer"] == summarizer
     last = results["rounds"][-1]

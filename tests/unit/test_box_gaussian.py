@@ -6,8 +6,8 @@ import pytest
 import torch
 from scipy import stats
 
-from bayessim_exp.models.box_gaussian import ghk, truncated_standard_normal
-from bayessim_exp.models.mixture import GaussianMixture, TruncatedMixture
+from bayessim_exp.distributions.ghk import ghk, truncated_standard_normal
+from bayessim_exp.distributions.mixture import GaussianMixture, TruncatedMixture
 
 
 def test_truncated_standard_normal_far_in_the_tails():

@@ -5,18 +5,18 @@ Cheap simulator: the linear-Gaussian one; 4000 training and 500 held-out simulat
 
 import pytest
 import torch
+from linear_gaussian import gaussian_draws
+from test_models import CONFIGS, PRIOR, SIM
 
 from bayessim_exp.diagnostics.coverage import expected_coverage
 from bayessim_exp.registry import build
-from linear_gaussian import gaussian_draws
-from test_models import CONFIGS, PRIOR, SIM
 
 
 class _Oracle:
     """The exact posterior: coverage must be nominal up to Monte Carlo error."""
 
     def conditional(self, x):
-        from bayessim_exp.models.mixture import GaussianMixture
+        from bayessim_exp.distributions.mixture import GaussianMixture
 
         mean, cov = SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[None])
         return GaussianMixture(torch.zeros(1), mean[None], cov[None])

@@ -60,9 +60,10 @@ def test_nan_in_training_names_the_round_and_step():
 def test_embedding_is_trained_jointly():
     theta, x, _, _ = linear_gaussian(2000)
     embedding = torch.nn.Linear(3, 4)
-    from bayessim_exp.models.mdnn import MDNN, MdnnConfig
+    from bayessim_exp import registry
 
-    model = MDNN(MdnnConfig(components=1, max_epochs=3, hidden=[16]), theta_dim=2, x_dim=3, embedding=embedding)
+    model = registry.build("model", {"name": "mdnn", "components": 1, "max_epochs": 3, "hidden": [16]},
+                           theta_dim=2, x_dim=3, embedding=embedding)
     model.fit(theta, x, seed=0)
     before = embedding.weight.detach().clone()
     model.fit(theta, x, seed=1)  # fine-tuning moves the embedding with the rest of the network

@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from bayessim_exp.models.mixture import GaussianMixture, TruncatedMixture
+from bayessim_exp.distributions.mixture import GaussianMixture, TruncatedMixture
 
 
 def gaussian(mean, cov):

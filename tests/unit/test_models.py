@@ -6,12 +6,12 @@ standard deviations within a factor 1.33 (4000 simulations, small networks, fixe
 
 import pytest
 import torch
-
-from bayessim_exp.models.correction import posterior
-from bayessim_exp.models.mixture import GaussianMixture
-from bayessim_exp.priors import GaussianPrior
-from bayessim_exp.registry import build
 from linear_gaussian import LinearGaussian, gaussian_draws
+
+from bayessim_exp.distributions.independent import GaussianPrior
+from bayessim_exp.distributions.mixture import GaussianMixture
+from bayessim_exp.inference.bayessim.correction import posterior
+from bayessim_exp.registry import build
 
 A = torch.tensor([[1.0, 0.5], [-0.3, 2.0], [0.7, 0.0]])
 SIM = LinearGaussian(A, torch.tensor([0.1, -0.2, 0.3]), 0.2 * torch.eye(3))

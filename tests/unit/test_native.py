@@ -4,9 +4,9 @@ import mujoco
 import numpy as np
 import torch
 
-from bayessim_exp.pipeline import Pipeline
+from bayessim_exp import registry
+from bayessim_exp.inference.bayessim.method import BayesSim
 from bayessim_exp.policies import RandomPolicy
-from bayessim_exp.sim.native import NativeSimulator
 from bayessim_exp.tasks.base import Task, TaskConfig
 
 SPRING = """
@@ -36,19 +36,23 @@ class Spring(Task):
         return -obs[:, 0] ** 2
 
 
+def native(task, n):
+    return registry.build("sim", {"name": "native"})(task, n)
+
+
 def spring_task():
     # explicit Euler on x'' = -k/m x is unstable once dt * sqrt(k/m) is large: k=1e6, m=0.01 blows up
     cfg = TaskConfig(parameters={"k": {"range": [1.0, 1.0e6], "operation": "set", "targets": ["jnt_stiffness[slide]"]}},
-                     real_params={"k": 10.0}, control_dt=0.02)
+                     real_params={"k": 10.0}, control_dt=0.02, episode_length=200)
     return Spring(cfg)
 
 
 def test_diverging_simulations_are_flagged_and_kept_apart(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MuJoCo logs the instability to MUJOCO_LOG.TXT in the working dir
     task = spring_task()
-    sim = NativeSimulator(task, 4)
+    sim = native(task, 4)
     params = np.array([[10.0], [1.0e6], [100.0], [1.0e6]])
-    traj = sim.rollout(params, RandomPolicy(1, 0), 100, np.random.default_rng(0))
+    traj = sim.rollout(params, RandomPolicy(1, 0), 100, seed=0)
     assert traj.diverged.tolist() == [False, True, False, True]
     assert traj.valid[~traj.diverged].all()
     assert not traj.valid[traj.diverged, -1].any()  # invalid from the step it broke down
@@ -58,20 +62,21 @@ def test_diverging_simulations_are_flagged_and_kept_apart(tmp_path, monkeypatch)
 def test_summarize_drops_and_counts_diverged_simulations(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     task = spring_task()
-    traj = NativeSimulator(task, 4).rollout(np.array([[10.0], [1.0e6], [100.0], [1.0e6]]), RandomPolicy(1, 0), 50,
-                                            np.random.default_rng(0))
-    pipe = Pipeline.__new__(Pipeline)
-    pipe.device = torch.device("cpu")
-    pipe.comp = type("C", (), {"summarizer": lambda self, t: t.states[:, -1]})()
-    out = pipe.summarize(1, {"theta": torch.tensor([[10.0], [1.0e6], [100.0], [1.0e6]]), "traj": traj.state_dict(),
-                             "seconds": 0.0})
+    traj = native(task, 4).rollout(np.array([[10.0], [1.0e6], [100.0], [1.0e6]]), RandomPolicy(1, 0), 50, seed=0)
+    comp = type("C", (), {"summarizer": lambda self, t: t.states[:, -1], "device": torch.device("cpu")})()
+    collected = {"theta": torch.tensor([[10.0], [1.0e6], [100.0], [1.0e6]]), "traj": traj.state_dict()}
+    ctx = type("Ctx", (), {"output": lambda self, stage: collected})()
+    out = BayesSim(None, comp).summarize(ctx)
     assert out["diverged"] == 2
     assert out["theta"].squeeze(1).tolist() == [10.0, 100.0]
 
 
 def test_parameters_change_the_dynamics_per_environment(pendulum):
     params = np.array([[1.0, 0.5], [2.0, 0.5], [1.0, 1.0]])
-    run = lambda p: NativeSimulator(pendulum, 3).rollout(p, RandomPolicy(1, 0), 30, np.random.default_rng(0))
+
+    def run(p):
+        return native(pendulum, 3).rollout(p, RandomPolicy(1, 0), 30, seed=0)
+
     traj, swapped = run(params), run(params[[1, 0, 2]])
     # equal seeds give each slot the same initial state and actions in both runs: only parameters differ
     assert not torch.allclose(traj.states[0], swapped.states[0])
@@ -101,7 +106,8 @@ class Marker(Task):
 
 
 def test_first_observation_after_reset_reads_derived_fields():
-    cfg = TaskConfig(parameters={"m": {"range": [0.5, 2.0], "targets": ["body_mass[bob]"]}}, real_params={"m": 1.0})
-    sim = NativeSimulator(Marker(cfg), 2)
-    obs = sim.reset(np.ones((2, 1)), None, np.random.default_rng(0))
+    cfg = TaskConfig(parameters={"m": {"range": [0.5, 2.0], "targets": ["body_mass[bob]"]}}, real_params={"m": 1.0}, control_dt=0.05,
+                     episode_length=200)
+    sim = native(Marker(cfg), 2)
+    obs = sim.reset(np.ones((2, 1)), None, seed=0)
     np.testing.assert_allclose(obs[:, 0], 1.5)  # site_xpos computed at the reset state, not zeros

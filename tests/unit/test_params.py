@@ -49,7 +49,7 @@ def test_written_fields_read_back_per_environment(model):
     sim.batch = mujoco.batch.Batch(model, 3, nthread=1)
     sim.num_envs = 3
     sim.task = type("T", (), {"spec": spec, "model": model})()
-    sim.set_params(values)
+    sim.set_params(values, np.arange(3))
     b = sim.batch
     lower = model.body("lower").id
     np.testing.assert_allclose(b.expanded("body_mass")[:, lower], model.body_mass[lower] * values[:, 0])

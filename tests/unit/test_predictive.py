@@ -3,8 +3,8 @@
 import torch
 
 from bayessim_exp.diagnostics.predictive import predictive_distances
-from bayessim_exp.models.mixture import GaussianMixture
-from bayessim_exp.priors import BoxUniform
+from bayessim_exp.distributions.independent import BoxUniform
+from bayessim_exp.distributions.mixture import GaussianMixture
 
 
 def test_a_concentrated_posterior_is_closer_than_the_prior():

@@ -2,7 +2,7 @@
 
 import torch
 
-from bayessim_exp.priors import GaussianPrior, LogUniform
+from bayessim_exp.distributions.independent import GaussianPrior, LogUniform
 from bayessim_exp.registry import build
 
 LOW, HIGH = torch.tensor([0.1, 2.0], dtype=torch.float64), torch.tensor([10.0, 3.0], dtype=torch.float64)

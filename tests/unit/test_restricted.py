@@ -4,7 +4,7 @@ import pytest
 import torch
 from torch.distributions import MultivariateNormal
 
-from bayessim_exp.models.restricted import Restricted
+from bayessim_exp.distributions.restricted import Restricted
 
 
 def test_restricted_normal_stays_in_the_box_and_renormalises():

@@ -128,19 +128,20 @@ def test_ppo_config_per_task_smoke_and_command_line(compose):
         registry.parse_params("rl", compose(["rl=ppo", "rl.train.total_steps=10"]).rl)
 
 
-def test_train_evaluate_finetune_outside_the_pipeline(compose):
-    from bayessim_exp.pipeline import build_components, check_run_config
+def test_train_evaluate_finetune_outside_the_pipeline(compose, tmp_path):
+    from bayessim_exp.components import build_components
     from bayessim_exp.rl.standalone import StandaloneRounds
+    from bayessim_exp.run_config import check_run_config
 
-    overrides = ["task=Pendulum", "rl=ppo", "debug=smoke", "rl.finetune=true", "rl.evaluate.video_steps=3"]
-    cfg = compose(overrides)
-    comp = build_components(cfg, check_run_config(cfg))
-    component = registry.build("rl", cfg.rl, task=comp.task, device="cpu")
-    ctx = StandaloneRounds(comp.task, comp.sims, comp.prior, posterior=comp.prior, seed=0)
-    assert component.actor(ctx) is None
-    for stage in component.stages():
-        ctx.run(stage)
-    record = component.record(ctx)
+    def rounds(out_dir):
+        cfg = compose(["task=Pendulum", "rl=ppo", "debug=smoke", "rl.finetune=true", "rl.evaluate.video_steps=3"])
+        comp = build_components(cfg, check_run_config(cfg))
+        return comp, StandaloneRounds(comp, comp.prior, out_dir)
+
+    comp, runner = rounds(tmp_path / "a")
+    assert comp.rl.actor(runner.context(1)) is None
+    ctx = runner.run_round(1)
+    record = comp.rl.record(ctx)
     ret = record["surrogate_real_return"]
     assert ret["min"] <= ret["mean"] <= ret["max"] < 0  # Pendulum's rewards are costs
     assert record["rl_training"]["steps"] == 512
@@ -148,12 +149,10 @@ def test_train_evaluate_finetune_outside_the_pipeline(compose):
     if video is not None:  # a GIF where OpenGL works; otherwise the reason was logged
         assert video[:6] == b"GIF89a"
     first = ctx.output("train_policy")["trainer"]
-    ctx.next_round()
-    assert component.actor(ctx) is not None  # round 1's actor collects until round 2's is trained
-    ctx.run(component.stages()[0])
-    assert ctx.output("train_policy")["trainer"]["steps_done"] == 2 * first["steps_done"]  # continued
-    same_seed = StandaloneRounds(comp.task, comp.sims, comp.prior, posterior=comp.prior, seed=0)
-    again = same_seed.run(component.stages()[0])["trainer"]["agent"]
+    assert comp.rl.actor(runner.context(2)) is not None  # round 1's actor collects until round 2's is trained
+    second = runner.run_round(2).output("train_policy")["trainer"]
+    assert second["steps_done"] == 2 * first["steps_done"]  # continued round 1's policy
+    again = rounds(tmp_path / "b")[1].run_round(1).output("train_policy")["trainer"]["agent"]
     assert all(torch.equal(first["agent"][k], again[k]) for k in first["agent"])  # seeded by stage name
 
 

@@ -15,7 +15,6 @@ from omegaconf import OmegaConf
 
 from bayessim_exp import registry
 from bayessim_exp.errors import ConfigError
-from bayessim_exp.sim.native import NativeSimulator
 
 CONF = Path(__file__).resolve().parents[2] / "conf" / "task"
 TASKS = registry.names("task")
@@ -58,8 +57,8 @@ def test_every_parameter_changes_the_trajectory(name):
     # one initial state for every slot, so only the parameters differ
     draw = task.reset_state
     task.reset_state = lambda rng, n: {k: np.repeat(v[:1], n, 0) for k, v in draw(rng, 1).items()}
-    sim = NativeSimulator(task, len(params))
-    traj = sim.rollout(params, Replay(fixed_actions(HORIZON, task.action_dim)), HORIZON, np.random.default_rng(0))
+    sim = registry.build("sim", {"name": "native"})(task, len(params))
+    traj = sim.rollout(params, Replay(fixed_actions(HORIZON, task.action_dim)), HORIZON, seed=0)
 
     assert not traj.diverged.any(), f"diverged at {[spec.names[(i - 1) // 2] for i in np.flatnonzero(traj.diverged)]}"
     assert torch.isfinite(traj.rewards).all() and torch.isfinite(traj.states).all()

@@ -14,7 +14,7 @@ overconfident posteriors, above nominal underconfident ones.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import torch
 

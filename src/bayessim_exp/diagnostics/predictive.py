@@ -8,7 +8,7 @@ A posterior that explains the real data gives a clearly smaller distance than th
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 

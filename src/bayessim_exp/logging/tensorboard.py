@@ -18,10 +18,11 @@ class TensorBoardLogger:
         # four-space indent renders as a code block in TensorBoard's text tab
         self.writer.add_text("config", "\n".join("    " + line for line in yaml_text.splitlines()), 0)
 
-    def losses(self, round_index: int, history: dict, first_epoch: int) -> None:
+    def losses(self, round_index: int, history: dict) -> None:
+        """One round's training curve, under its own tag so rounds overlay on the epoch axis."""
         for k, (train, val) in enumerate(zip(history["train"], history["val"])):
-            self.writer.add_scalar("loss/train", train, first_epoch + k)
-            self.writer.add_scalar("loss/val", val, first_epoch + k)
+            self.writer.add_scalar(f"loss/round_{round_index}/train", train, k)
+            self.writer.add_scalar(f"loss/round_{round_index}/val", val, k)
         self.writer.add_scalar("loss/best_val_per_round", history["best_val"], round_index)
 
     def scalars(self, round_index: int, values: dict[str, float]) -> None:
@@ -30,14 +31,14 @@ class TensorBoardLogger:
                 self.writer.add_scalar(tag, v, round_index)
 
     def posterior(self, round_index: int, posterior, prior, names: list[str], plot_names: list[str],
-                  true: np.ndarray | None, num_samples: int) -> None:
+                  true: np.ndarray | None, num_samples: int, low: np.ndarray, high: np.ndarray) -> None:
+        """Pair plot of posterior draws over prior draws; low/high: the parameters' ranges (the axes)."""
         from .plots import pair_plot
 
         idx = [names.index(n) for n in plot_names]
         samples = posterior.sample((num_samples,)).numpy()[:, idx]
         prior_samples = prior.sample((num_samples,)).numpy()[:, idx]
-        low, high = prior.low.numpy()[idx], prior.high.numpy()[idx]
-        fig = pair_plot(samples, plot_names, low, high, None if true is None else true[idx],
+        fig = pair_plot(samples, plot_names, np.asarray(low)[idx], np.asarray(high)[idx], None if true is None else true[idx],
                         f"posterior, round {round_index}", prior_samples)
         self.writer.add_figure("posterior", fig, round_index)
         self.writer.flush()

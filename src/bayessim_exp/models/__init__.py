@@ -1,1 +1,1 @@
-"""Posterior models q(theta | x) and the mixture algebra around them."""
+"""Posterior estimators q(theta | x): fit on simulations, conditional distributions given a summary."""

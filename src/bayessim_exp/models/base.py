@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import torch
 
+from ..distributions.mixture import GaussianMixture
 from ..errors import ConfigError, TrainingError
-from .mixture import GaussianMixture
 
 
 class PosteriorModel(Protocol):
@@ -27,12 +28,12 @@ class PosteriorModel(Protocol):
 class TrainConfig:
     """Optimisation settings shared by the mixture-density models."""
 
-    lr: float = 1.0e-3
-    batch_size: int = 256
-    max_epochs: int = 300
-    patience: int = 20  # epochs without validation improvement before stopping
-    val_fraction: float = 0.1
-    weight_decay: float = 0.0
+    lr: float
+    batch_size: int
+    max_epochs: int
+    patience: int  # epochs without validation improvement before stopping
+    val_fraction: float
+    weight_decay: float
 
     def validate(self) -> None:
         if self.lr <= 0 or self.batch_size < 1 or self.max_epochs < 1 or self.patience < 1:

@@ -3,7 +3,7 @@
 Its density has no closed-form product with Gaussians, so the SNPE-A correction cannot be done
 analytically. Rounds after the first therefore use truncated proposals (TSNPE, Deistler et al.
 2022): simulations come from the prior restricted to the previous posterior's highest-density
-region (models/proposals.py, `TruncatedPrior`), where the ratio prior / proposal is constant, so
+region (distributions/truncated_prior.py, `TruncatedPrior`), where the ratio prior / proposal is constant, so
 q itself is the posterior on that region and needs no correction, only the restriction to the
 prior's support. Given any other proposal, conditioning falls back to exact importance weights.
 """
@@ -17,6 +17,7 @@ import torch
 import zuko
 from torch import nn
 
+from ..distributions.base import ParameterDistribution, seeded_by
 from ..errors import ConfigError
 from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
@@ -24,9 +25,9 @@ from .base import StandardizedDensityModel, Standardizer, TrainConfig
 
 @dataclasses.dataclass
 class FlowConfig(TrainConfig):
-    transforms: int = 3  # autoregressive spline layers
-    hidden: list[int] = dataclasses.field(default_factory=lambda: [64, 64])
-    bins: int = 8  # spline bins per transform
+    transforms: int  # autoregressive spline layers
+    hidden: list[int]
+    bins: int  # spline bins per transform
 
     def validate(self) -> None:
         super().validate()
@@ -40,7 +41,7 @@ def _chunks(n: int, size: int) -> list[int]:
     return [min(size, n - start) for start in range(0, n, size)]
 
 
-class FlowConditional:
+class FlowConditional(ParameterDistribution):
     """q(theta | x_obs) in parameter units: the flow on standardised theta, mapped back."""
 
     def __init__(self, dist, shift: torch.Tensor, scale: torch.Tensor):
@@ -52,10 +53,11 @@ class FlowConditional:
         return self.shift.shape[0]
 
     @torch.no_grad()
-    def sample(self, shape: tuple[int, ...] = (1,)) -> torch.Tensor:
+    def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         n = math.prod(shape)
         # the autoregressive inverse runs the network once per dimension: bound its memory by chunks
-        z = torch.cat([self.dist.sample((k,)) for k in _chunks(n, 4096)]).double()
+        with seeded_by(generator):
+            z = torch.cat([self.dist.sample((k,)) for k in _chunks(n, 4096)]).double()
         return (self.shift + self.scale * z).reshape(*shape, self.dim)
 
     @torch.no_grad()

@@ -13,20 +13,20 @@ import math
 import torch
 from torch import nn
 
+from ..distributions.mixture import GaussianMixture
 from ..errors import ConfigError
 from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
-from .mixture import GaussianMixture
 
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 
 
 @dataclasses.dataclass
 class MdnnConfig(TrainConfig):
-    components: int = 5
-    hidden: list[int] = dataclasses.field(default_factory=lambda: [128, 128])
-    activation: str = "relu"
-    covariance: str = "full"  # full | diagonal
+    components: int
+    hidden: list[int]
+    activation: str
+    covariance: str  # full | diagonal
 
     def validate(self) -> None:
         super().validate()

@@ -30,14 +30,14 @@ KERNELS = {"rbf": None, "matern12": 1.0, "matern32": 3.0, "matern52": 5.0}
 
 @dataclasses.dataclass
 class MdrffConfig(TrainConfig):
-    features: int = 500  # random Fourier features (cos and sin of features / 2 frequencies)
-    kernel: str = "rbf"  # rbf | matern12 | matern32 | matern52
-    lengthscale: float = 2.0  # in units of the standardised summaries
-    quasi_random: bool = True  # scrambled Halton frequencies instead of i.i.d. draws
-    components: int = 5
-    covariance: str = "full"  # full | diagonal
-    hidden: list[int] = dataclasses.field(default_factory=list)  # layers between features and head; [] is BayesSim's linear head
-    activation: str = "relu"  # of the hidden layers
+    features: int  # random Fourier features (cos and sin of features / 2 frequencies)
+    kernel: str  # rbf | matern12 | matern32 | matern52
+    lengthscale: float  # in units of the standardised summaries
+    quasi_random: bool  # scrambled Halton frequencies instead of i.i.d. draws
+    components: int
+    covariance: str  # full | diagonal
+    hidden: list[int]  # layers between features and head; [] is BayesSim's linear head
+    activation: str  # of the hidden layers
 
     def validate(self) -> None:
         super().validate()

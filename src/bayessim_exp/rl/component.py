@@ -11,21 +11,19 @@ Stages (run by the pipeline after the round's condition stage, each saved as rou
 `train_on=prior` is the uniform domain-randomization baseline and `nominal` trains on the MJCF's own
 parameters, so the posterior-vs-prior-vs-nominal comparison is one sweep over rl.train_on.
 
-The component needs from the pipeline a round context (`RoundContext`): the round, the stage's seed,
-the task, the simulator pool, the surrogate real parameters, the prior, the round's posterior, earlier
-stages' outputs and the TensorBoard logger.
+It reads from the round's context (stages.RoundContext): the seed, earlier artifacts, the TensorBoard
+logger and the run's components (simulator pool, prior, the inference method's posterior, the real
+data source's true parameters).
 """
 
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, NamedTuple, Protocol
 
 import numpy as np
 import torch
 
-from ..sim.pool import SimulatorPool
-from ..tasks.base import Task
+from ..stages import RoundContext, Stage
 from .config import PPOComponentConfig
 from .env import SimulatorEnv, distribution_sampler, fixed_params
 from .evaluate import episode_returns, summary
@@ -34,36 +32,14 @@ from .ppo import PPOTrainer
 log = logging.getLogger(__name__)
 
 
-class RoundContext(Protocol):
-    round: int  # 1-based
-    seed: int  # this stage's seed (derived from the run seed, the round and the stage's name)
-    task: Task
-    sims: SimulatorPool
-    real_params: np.ndarray  # [D], the surrogate real system's parameters
-    prior: Any  # distributions with .sample((n,)) -> float64 [n, D]
-    tb: Any  # TensorBoardLogger, or None
-
-    def posterior(self) -> Any: ...
-
-    def output(self, stage: str, round: int | None = None) -> dict | None:
-        """A finished stage's artifact (this round when round is None), None if it has not run."""
-
-
-class StageSpec(NamedTuple):
-    name: str
-    run: Callable[[RoundContext], dict]
-    inputs: tuple[str, ...]  # stages of the same round whose outputs `run` reads
-
-
 class PPOComponent:
-    def __init__(self, cfg: PPOComponentConfig, task: Task, device: str):
-        self.cfg, self.task, self.device = cfg, task, torch.device(device)
+    def __init__(self, cfg: PPOComponentConfig, comp):
+        self.cfg, self.task, self.device = cfg, comp.task, comp.device
         self.train_cfg = cfg.train
 
-    def stages(self) -> list[StageSpec]:
-        needs = ("condition",) if self.cfg.train_on == "posterior" else ()  # the stage that gives the posterior
-        return [StageSpec("train_policy", self.train_policy, needs),
-                StageSpec("evaluate", self.evaluate, ("train_policy",))]
+    def stages(self) -> list[Stage]:
+        # train_policy reads the round's distribution through the inference method, not an artifact
+        return [Stage("train_policy", self.train_policy), Stage("evaluate", self.evaluate, inputs=("train_policy",))]
 
     def trainer(self, state: dict | None = None) -> PPOTrainer:
         trainer = PPOTrainer(self.train_cfg, self.task.obs_dim, self.task.action_dim, self.device)
@@ -74,14 +50,16 @@ class PPOComponent:
     def sampler(self, ctx: RoundContext):
         if self.cfg.train_on == "nominal":
             return fixed_params(self.task.spec.nominal)
-        return distribution_sampler(ctx.prior if self.cfg.train_on == "prior" else ctx.posterior())
+        return distribution_sampler(ctx.comp.prior if self.cfg.train_on == "prior" else ctx.comp.method.posterior(ctx))
 
     def train_policy(self, ctx: RoundContext) -> dict:
         previous = ctx.output("train_policy", ctx.round - 1) if self.cfg.finetune and ctx.round > 1 else None
+        if previous is not None:
+            log.info("round %d: PPO continues round %d's policy", ctx.round, ctx.round - 1)
         with torch.random.fork_rng():
             torch.manual_seed(ctx.seed)  # network initialisation and action sampling
             trainer = self.trainer(None if previous is None else previous["trainer"])
-            env = SimulatorEnv(ctx.sims.get(self.train_cfg.num_envs), self.sampler(ctx), ctx.seed)
+            env = SimulatorEnv(ctx.comp.sims.get(self.train_cfg.num_envs), self.sampler(ctx), ctx.seed)
             curve = trainer.train(env, ctx.seed, self._logger(ctx))
         log.info("round %d: PPO on %s, %d steps in %.1f s, last training episode return %.1f", ctx.round,
                  self.cfg.train_on, curve["steps"][-1], curve["seconds"][-1], _last_finite(curve["episode_return"]))
@@ -100,28 +78,29 @@ class PPOComponent:
     def actor(self, ctx: RoundContext):
         """The latest trained actor at this point of the round (None before the first train_policy)."""
         for r in range(ctx.round, 0, -1):
-            trained = ctx.output("train_policy", r)
-            if trained is not None:
-                return self.trainer(trained["trainer"]).actor
+            if ctx.has("train_policy", r):
+                return self.trainer(ctx.output("train_policy", r)["trainer"]).actor
         return None
 
     def evaluate(self, ctx: RoundContext) -> dict:
         from ..policies import ActorPolicy
         from .video import render_gif
 
+        real_params = ctx.comp.real.true_params
+        if real_params is None:
+            log.warning("round %d: the real data source has no true parameters: no surrogate-real evaluation", ctx.round)
+            return {"summary": None, "video": None}
         actor = self.trainer(ctx.output("train_policy")["trainer"]).actor
         e = self.cfg.evaluate
-        returns = episode_returns(actor, ctx.sims.get(e.episodes), ctx.real_params, ctx.seed)
+        returns = episode_returns(actor, ctx.comp.sims.get(e.episodes), real_params, ctx.seed)
         out = {"returns": returns, "summary": summary(returns), "video": None}
         if e.video_steps:
             policy = ActorPolicy(actor, self.task.action_dim, ctx.seed, random_share=0.0)
-            out["video"], why = render_gif(self.task, ctx.real_params, policy, e.video_steps, e.video_size, ctx.seed)
+            out["video"], why = render_gif(self.task, real_params, policy, e.video_steps, e.video_size, ctx.seed)
             if out["video"] is None:
                 log.warning("round %d: no video of the policy: %s", ctx.round, why)
-        if ctx.tb is not None:
-            ctx.tb.scalars(ctx.round, {f"rl/surrogate_real_return_{k}": v for k, v in out["summary"].items()})
-            if out["video"] is not None:
-                ctx.tb.gif("rl/surrogate_real_video", out["video"], ctx.round)
+        if ctx.tb is not None and out["video"] is not None:  # the returns reach TensorBoard through record()
+            ctx.tb.gif("rl/surrogate_real_video", out["video"], ctx.round)
         log.info("round %d: surrogate real return %.1f (min %.1f, max %.1f) over %d episodes", ctx.round,
                  out["summary"]["mean"], out["summary"]["min"], out["summary"]["max"], e.episodes)
         return out

@@ -68,8 +68,8 @@ class PPOComponentConfig:
 
 
 @register("rl", "ppo", PPOComponentConfig)
-def ppo_component(cfg: PPOComponentConfig, task, device: str, **_: object):
-    """device: where the networks train (the run's `device`; the simulator's device for MJX on a GPU)."""
+def ppo_component(cfg: PPOComponentConfig, comp, **_: object):
+    """comp: the run's Components; the networks train on the run's `device`."""
     from .component import PPOComponent
 
-    return PPOComponent(cfg, task, device)
+    return PPOComponent(cfg, comp)

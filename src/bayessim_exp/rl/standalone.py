@@ -1,55 +1,50 @@
-"""The RL stages outside the pipeline: rounds whose posterior you hand in, outputs kept in memory.
+"""The RL stages outside the pipeline, on a distribution you hand in (a saved posterior, the prior).
 
-    ctx = StandaloneRounds(task, sims, posterior=api.load_run(run_dir).posterior(), seed=0)
-    component = registry.build("rl", cfg.rl, task=task, device="cpu")
-    for stage in component.stages():
-        ctx.run(stage)
-    component.record(ctx)
+    comp = build_components(cfg, check_run_config(cfg))          # cfg with rl=ppo
+    rounds = StandaloneRounds(comp, api.load_run(run_dir).posterior(), "outputs/ppo_on_saved_posterior")
+    rounds.run_round(1)
+    comp.rl.record(rounds.context(1))
 
-Used by scripts/rl_posterior_vs_prior.py, benchmarks/rl.py and the tests; stage seeds follow the
-pipeline's rule (run seed, round, stage name).
+Artifacts go to `out_dir` as in a pipeline run (round_NNN/<stage>.pt, skipped when there), and stages
+are seeded by name exactly as there. Used by scripts/rl_posterior_vs_prior.py and the tests.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ..sim.pool import SimulatorPool
-from ..tasks.base import Task
+from ..artifacts import RunDir
+from ..stages import RoundContext
 
 
-def stage_seed(seed: int, round_index: int, stage: str) -> int:
-    return int(np.random.SeedSequence([seed, round_index, *stage.encode()]).generate_state(1)[0])
+class GivenDistribution:
+    """Stands in for the inference method: every round's distribution is the one handed in."""
+
+    def __init__(self, distribution: Any):
+        self.distribution = distribution
+
+    def posterior(self, ctx: RoundContext) -> Any:
+        return self.distribution
 
 
 class StandaloneRounds:
-    """A RoundContext (rl/component.py) over fixed distributions; `next_round()` starts a new round."""
+    def __init__(self, comp, distribution: Any, out_dir: str | Path, tb: Any = None):
+        if comp.rl is None:
+            raise ValueError("the components were built with rl=none")
+        comp.method = GivenDistribution(distribution)
+        self.comp, self.run_dir, self.tb = comp, RunDir(out_dir), tb
 
-    def __init__(self, task: Task, sims: SimulatorPool, prior: Any, posterior: Any = None, seed: int = 0,
-                 real_params: np.ndarray | None = None, tb: Any = None):
-        self.task, self.sims, self.prior, self._posterior = task, sims, prior, posterior
-        self.run_seed, self.tb = seed, tb
-        self.real_params = task.real_values if real_params is None else np.asarray(real_params, dtype=np.float64)
-        self.round, self.seed = 1, 0
-        self.outputs: dict[tuple[int, str], dict] = {}
+    def context(self, round_index: int) -> RoundContext:
+        return RoundContext(self.comp, self.run_dir, round_index, self.comp.rc.seed, self.tb)
 
-    def posterior(self) -> Any:
-        if self._posterior is None:
-            raise ValueError("no posterior was given to StandaloneRounds")
-        return self._posterior
-
-    def output(self, stage: str, round: int | None = None) -> dict | None:
-        return self.outputs.get((self.round if round is None else round, stage))
-
-    def run(self, stage) -> dict:
-        """Run a StageSpec in the current round (skipped when its output is there) and keep its output."""
-        key = (self.round, stage.name)
-        if key not in self.outputs:
-            self.seed = stage_seed(self.run_seed, self.round, stage.name)
-            self.outputs[key] = stage.run(self)
-        return self.outputs[key]
-
-    def next_round(self) -> None:
-        self.round += 1
+    def run_round(self, round_index: int) -> RoundContext:
+        """Run the RL component's stages of one round (those not already saved) and return its context."""
+        ctx = self.context(round_index)
+        for stage in self.comp.rl.stages():
+            ctx.stage = stage.name
+            if not ctx.has(stage.name):
+                out = stage.run(ctx)
+                self.run_dir.save(round_index, stage.name, out)
+                ctx.remember(stage.name, out)
+        return ctx

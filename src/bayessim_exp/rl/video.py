@@ -3,13 +3,15 @@
 Rendering needs an MjData, so the episode is replayed here on one plain MuJoCo model with the
 parameters written in (the same ParamSpec.field_values the backends use), whatever backend trained the
 policy. Headless machines need MUJOCO_GL=egl or osmesa set before mujoco is imported; without a GL
-context `render_gif` returns None and the reason, and the run goes on.
+context `render_gif` returns None and the reason, and the run goes on. It does not even try GLFW
+without a display: a second failed GLFW start aborts the whole process.
 """
 
 from __future__ import annotations
 
 import copy
 import io
+import os
 import types
 
 import mujoco
@@ -28,10 +30,24 @@ def model_with_params(task: Task, params: np.ndarray) -> mujoco.MjModel:
     return model
 
 
+_failed: list[str] = []  # the first failure's reason: a GL context that failed once is not tried again
+
+
+def gl_unavailable() -> str:
+    """Why no offscreen GL context can be made here ("" if one may be)."""
+    if _failed:
+        return _failed[0]
+    if os.environ.get("MUJOCO_GL", "").lower() in ("egl", "osmesa") or os.environ.get("DISPLAY"):
+        return ""
+    return "no display and MUJOCO_GL is not egl or osmesa (set it before starting Python)"
+
+
 def render_gif(task: Task, params: np.ndarray, policy, steps: int, size: int, seed: int) -> tuple[bytes | None, str]:
     """(GIF bytes, "") of `steps` control steps of `policy`, or (None, why not)."""
     from PIL import Image
 
+    if gl_unavailable():
+        return None, gl_unavailable()
     model = model_with_params(task, params)
     data = mujoco.MjData(model)
     if task.spec.needs_set_const:
@@ -39,7 +55,8 @@ def render_gif(task: Task, params: np.ndarray, policy, steps: int, size: int, se
     try:
         renderer = mujoco.Renderer(model, size, size)
     except Exception as exc:  # no EGL/OSMesa/GLX context: each backend raises its own type
-        return None, f"no OpenGL context for the offscreen renderer ({type(exc).__name__}: {exc}); set MUJOCO_GL=egl or osmesa"
+        _failed.append(f"no OpenGL context for the offscreen renderer ({type(exc).__name__}: {exc})")
+        return None, _failed[0]
     for field, values in task.reset_state(np.random.default_rng(seed), 1).items():
         getattr(data, field)[...] = values[0]
     mujoco.mj_forward(model, data)

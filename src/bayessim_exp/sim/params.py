@@ -21,7 +21,8 @@ import dataclasses
 import difflib
 import fnmatch
 import re
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -126,14 +127,14 @@ class ParamSpec:
         return np.array([0.0 if p.operation == "additive" else p.nominal for p in self.params])
 
     @classmethod
-    def from_config(cls, parameters: dict[str, Any], model: mujoco.MjModel) -> "ParamSpec":
+    def from_config(cls, parameters: dict[str, Any], model: mujoco.MjModel) -> ParamSpec:
         params = []
         for name, raw in parameters.items():
             cfg = raw if isinstance(raw, ParamConfig) else ParamConfig(**raw)
             params.append(_parse_param(name, cfg, model))
         return cls(params)
 
-    def subset(self, names: Iterable[str]) -> "ParamSpec":
+    def subset(self, names: Iterable[str]) -> ParamSpec:
         names = list(names)
         missing = [n for n in names if n not in self.names]
         if missing:

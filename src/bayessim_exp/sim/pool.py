@@ -6,7 +6,7 @@ compilation); a collect of 10,000 simulations in chunks of 4,096 builds two: 4,0
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import torch

@@ -45,13 +45,13 @@ class Trajectories:
     def horizon(self) -> int:
         return self.actions.shape[1]
 
-    def select(self, index: torch.Tensor) -> "Trajectories":
+    def select(self, index: torch.Tensor) -> Trajectories:
         return Trajectories(
             self.states[index], self.actions[index], self.rewards[index], self.valid[index],
             self.diverged[index], self.dt,
         )
 
-    def truncate(self, horizon: int) -> "Trajectories":
+    def truncate(self, horizon: int) -> Trajectories:
         if horizon > self.horizon:
             raise ValueError(f"cannot truncate {self.horizon} steps to {horizon}")
         return Trajectories(
@@ -59,7 +59,7 @@ class Trajectories:
             self.valid[:, :horizon], self.diverged, self.dt,
         )
 
-    def to(self, device: torch.device | str) -> "Trajectories":
+    def to(self, device: torch.device | str) -> Trajectories:
         return Trajectories(
             *(getattr(self, f.name).to(device) for f in dataclasses.fields(self) if f.name != "dt"),
             dt=self.dt,
@@ -69,7 +69,7 @@ class Trajectories:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
     @staticmethod
-    def cat(parts: list["Trajectories"]) -> "Trajectories":
+    def cat(parts: list[Trajectories]) -> Trajectories:
         return Trajectories(
             *(torch.cat([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(Trajectories) if f.name != "dt"),
             dt=parts[0].dt,

@@ -14,8 +14,8 @@ from .masking import held_states
 
 @dataclasses.dataclass
 class StepsConfig:
-    steps: int = 20  # K
-    include_actions: bool = True
+    steps: int  # K
+    include_actions: bool
 
     def validate(self) -> None:
         if self.steps < 1:

@@ -25,7 +25,7 @@ from .masking import held_states
 
 @dataclasses.dataclass
 class CorrelationConfig:
-    lags: int = 2  # L: lags 0..L, in control steps
+    lags: int  # L: lags 0..L, in control steps
 
     def validate(self) -> None:
         if self.lags < 0:

@@ -28,11 +28,11 @@ _ARCHITECTURES = ("conv", "mlp")
 
 @dataclasses.dataclass
 class LearnedConfig:
-    time_points: int = 20  # K times the trajectory is sampled at
-    architecture: str = "conv"  # conv: 1D convolutions over the K times, mean-pooled; mlp: on the flat features
-    hidden: list[int] = dataclasses.field(default_factory=lambda: [32, 32])  # conv channels or MLP widths
-    kernel_size: int = 5  # conv only, in time points
-    embedding_dim: int = 16  # E
+    time_points: int  # K times the trajectory is sampled at
+    architecture: str  # conv: 1D convolutions over the K times, mean-pooled; mlp: on the flat features
+    hidden: list[int]  # conv channels or MLP widths
+    kernel_size: int  # conv only, in time points
+    embedding_dim: int  # E
 
     def validate(self) -> None:
         if self.time_points < 2:

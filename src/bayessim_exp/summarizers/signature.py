@@ -27,14 +27,14 @@ _BACKENDS = ("pysiglib", "torch")
 
 @dataclasses.dataclass
 class SignatureConfig:
-    depth: int = 2  # truncation level; the size grows as channels ** depth
-    log_signature: bool = False  # coefficients of the log-signature on the Lyndon words instead
-    time_augment: bool = True  # prepend the time channel; without it the signature ignores speed
-    lead_lag: bool = False  # (lag, lead) copies of the state-action channels: adds quadratic variation
-    basepoint: bool = False  # start the path at the origin, so the signature sees the initial state
-    backend: str = "pysiglib"  # pysiglib | torch
-    threads: int = 1  # pysiglib CPU threads (-1: all)
-    max_features: int = 50_000  # refuse, before simulating, summaries larger than this
+    depth: int  # truncation level; the size grows as channels ** depth
+    log_signature: bool  # coefficients of the log-signature on the Lyndon words instead
+    time_augment: bool  # prepend the time channel; without it the signature ignores speed
+    lead_lag: bool  # (lag, lead) copies of the state-action channels: adds quadratic variation
+    basepoint: bool  # start the path at the origin, so the signature sees the initial state
+    backend: str  # pysiglib | torch
+    threads: int  # pysiglib CPU threads (-1: all)
+    max_features: int  # refuse, before simulating, summaries larger than this
 
     def validate(self) -> None:
         if self.depth < 1:

@@ -20,12 +20,12 @@ from .base import Task, TaskConfig
 
 @dataclasses.dataclass
 class AerialConfig(TaskConfig):
-    up_weight: float = 1.0
-    max_dist: float = 3.0  # [m] from the target that ends the episode
-    min_height: float = 0.3  # [m] below which the episode ends
-    start: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 1.0])  # mean start position [m]
-    reset_pos: float = 0.2  # start position ~ start + U(-p, p) per axis [m]
-    reset_vel: float = 0.2  # linear and angular velocity ~ U(-v, v) per axis
+    up_weight: float
+    max_dist: float  # [m] from the target that ends the episode
+    min_height: float  # [m] below which the episode ends
+    start: list[float]  # mean start position [m]
+    reset_pos: float  # start position ~ start + U(-p, p) per axis [m]
+    reset_vel: float  # linear and angular velocity ~ U(-v, v) per axis
 
 
 class Aerial(Task):

@@ -25,16 +25,16 @@ _JOINTS = ("HAA", "HFE", "KFE")
 
 @dataclasses.dataclass
 class AnymalConfig(TaskConfig):
-    command_lin_x: list[float] = dataclasses.field(default_factory=lambda: [-2.0, 2.0])  # [m/s]
-    command_lin_y: list[float] = dataclasses.field(default_factory=lambda: [-1.0, 1.0])  # [m/s]
-    command_yaw: list[float] = dataclasses.field(default_factory=lambda: [-1.0, 1.0])    # [rad/s]
-    lin_vel_reward_scale: float = 1.0
-    ang_vel_reward_scale: float = 0.5
-    torque_reward_scale: float = -0.000025
-    lin_vel_scale: float = 2.0
-    ang_vel_scale: float = 0.25
-    dof_vel_scale: float = 0.05
-    min_base_height: float = 0.3  # [m]
+    command_lin_x: list[float]  # [m/s]
+    command_lin_y: list[float]  # [m/s]
+    command_yaw: list[float]  # [rad/s]
+    lin_vel_reward_scale: float
+    ang_vel_reward_scale: float
+    torque_reward_scale: float
+    lin_vel_scale: float
+    ang_vel_scale: float
+    dof_vel_scale: float
+    min_base_height: float  # [m]
 
 
 @register("task", "Anymal", AnymalConfig)

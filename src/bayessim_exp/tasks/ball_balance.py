@@ -20,11 +20,11 @@ from .base import Task, TaskConfig
 
 @dataclasses.dataclass
 class BallBalanceConfig(TaskConfig):
-    target_height: float = 0.7  # ball centre at rest on the level tray [m]
-    fall_height: float = 0.5  # ball centre below this [m]: off the tray, episode over
-    reset_max_dist: float = 0.2  # initial horizontal offset from the centre ~ U(0, d) [m]
-    reset_height: list[float] = dataclasses.field(default_factory=lambda: [0.9, 1.1])  # drop height [m]
-    reset_max_speed: float = 1.0  # horizontal speed towards the centre, up to this at offset d [m/s]
+    target_height: float  # ball centre at rest on the level tray [m]
+    fall_height: float  # ball centre below this [m]: off the tray, episode over
+    reset_max_dist: float  # initial horizontal offset from the centre ~ U(0, d) [m]
+    reset_height: list[float]  # drop height [m]
+    reset_max_speed: float  # horizontal speed towards the centre, up to this at offset d [m/s]
 
 
 @register("task", "BallBalance", BallBalanceConfig)

@@ -25,10 +25,10 @@ ASSETS = Path(__file__).parent / "assets"
 class TaskConfig:
     """Fields every task config has; tasks subclass it to add their own."""
 
-    parameters: dict[str, ParamConfig] = dataclasses.field(default_factory=dict)
-    real_params: dict[str, float] = dataclasses.field(default_factory=dict)
-    control_dt: float = 0.05
-    episode_length: int = 200
+    parameters: dict[str, ParamConfig]
+    real_params: dict[str, float]
+    control_dt: float
+    episode_length: int
 
     def validate(self) -> None:
         if not self.parameters:

@@ -18,9 +18,9 @@ from .base import Task, TaskConfig
 
 @dataclasses.dataclass
 class CartpoleConfig(TaskConfig):
-    reset_dist: float = 1.5  # |cart position| [m] that ends the episode (the rail ends at 1.8)
-    reset_pos: float = 0.1  # initial cart position and pole angle ~ U(-p, p)
-    reset_vel: float = 0.25  # initial velocities ~ U(-v, v)
+    reset_dist: float  # |cart position| [m] that ends the episode (the rail ends at 1.8)
+    reset_pos: float  # initial cart position and pole angle ~ U(-p, p)
+    reset_vel: float  # initial velocities ~ U(-v, v)
 
 
 @register("task", "Cartpole", CartpoleConfig)

@@ -21,17 +21,16 @@ from .base import Task, TaskConfig
 
 @dataclasses.dataclass
 class FrankaCabinetConfig(TaskConfig):
-    default_dof_pos: list[float] = dataclasses.field(
-        default_factory=lambda: [-0.5636, -0.5297, 0.4106, -2.903, -0.2572, 2.4692, -1.2016, 0.035, 0.035])
-    reset_noise: float = 0.25      # joint start ~ default + noise * U(-0.5, 0.5)
-    dof_vel_scale: float = 0.1
-    dist_reward_scale: float = 1.5
-    rot_reward_scale: float = 0.5
-    around_handle_reward_scale: float = 1.0
-    open_reward_scale: float = 4.0
-    finger_dist_reward_scale: float = 10.0
-    action_penalty_scale: float = 0.01
-    open_distance: float = 0.39    # [m] drawer opening that ends the episode
+    default_dof_pos: list[float]
+    reset_noise: float  # joint start ~ default + noise * U(-0.5, 0.5)
+    dof_vel_scale: float
+    dist_reward_scale: float
+    rot_reward_scale: float
+    around_handle_reward_scale: float
+    open_reward_scale: float
+    finger_dist_reward_scale: float
+    action_penalty_scale: float
+    open_distance: float  # [m] drawer opening that ends the episode
 
 
 @register("task", "FrankaCabinet", FrankaCabinetConfig)

@@ -11,13 +11,13 @@ from .locomotion import Locomotion, LocomotionConfig
 @dataclasses.dataclass
 class HumanoidConfig(LocomotionConfig):
     # IsaacGym's humanoid.yaml values
-    alive_reward: float = 2.0
-    actions_cost: float = 0.01
-    joints_at_limit_cost: float = 0.25
-    death_cost: float = -1.0
-    termination_height: float = 0.8
-    dof_vel_scale: float = 0.1
-    angvel_scale: float = 0.25
+    alive_reward: float
+    actions_cost: float
+    joints_at_limit_cost: float
+    death_cost: float
+    termination_height: float
+    dof_vel_scale: float
+    angvel_scale: float
 
 
 @register("task", "Humanoid", HumanoidConfig)

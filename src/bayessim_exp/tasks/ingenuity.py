@@ -18,13 +18,13 @@ from .aerial import Aerial, AerialConfig
 
 @dataclasses.dataclass
 class IngenuityConfig(AerialConfig):
-    up_weight: float = 5.0
-    max_dist: float = 8.0
-    min_height: float = 0.5
-    start: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 1.5])  # legs clear of min_height
-    reset_pos: float = 0.5
-    target_low: list[float] = dataclasses.field(default_factory=lambda: [-1.5, -1.5, 1.0])  # target ~ U(low, high) [m]
-    target_high: list[float] = dataclasses.field(default_factory=lambda: [1.5, 1.5, 2.5])
+    up_weight: float
+    max_dist: float
+    min_height: float
+    start: list[float]  # legs clear of min_height
+    reset_pos: float
+    target_low: list[float]  # target ~ U(low, high) [m]
+    target_high: list[float]
 
 
 @register("task", "Ingenuity", IngenuityConfig)

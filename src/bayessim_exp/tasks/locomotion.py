@@ -21,18 +21,18 @@ from .base import Task, TaskConfig
 
 @dataclasses.dataclass
 class LocomotionConfig(TaskConfig):
-    heading_weight: float = 0.5
-    up_weight: float = 0.1
-    alive_reward: float = 0.5
-    actions_cost: float = 0.005
-    energy_cost: float = 0.05
-    joints_at_limit_cost: float = 0.1
-    death_cost: float = -2.0
-    termination_height: float = 0.31  # torso height [m] below which the episode ends
-    dof_vel_scale: float = 0.2
-    angvel_scale: float = 1.0
-    reset_noise_pos: float = 0.2  # joint positions: home pose + U(-p, p), clipped to the limits
-    reset_noise_vel: float = 0.1  # joint velocities ~ U(-v, v)
+    heading_weight: float
+    up_weight: float
+    alive_reward: float
+    actions_cost: float
+    energy_cost: float
+    joints_at_limit_cost: float
+    death_cost: float
+    termination_height: float  # torso height [m] below which the episode ends
+    dof_vel_scale: float
+    angvel_scale: float
+    reset_noise_pos: float  # joint positions: home pose + U(-p, p), clipped to the limits
+    reset_noise_vel: float  # joint velocities ~ U(-v, v)
 
 
 class Locomotion(Task):

@@ -13,7 +13,7 @@ from .base import Task, TaskConfig
 
 @dataclasses.dataclass
 class PendulumConfig(TaskConfig):
-    max_speed_reset: float = 1.0  # initial angular speed ~ U(-v, v)
+    max_speed_reset: float  # initial angular speed ~ U(-v, v)
 
 
 @register("task", "Pendulum", PendulumConfig)

@@ -10,15 +10,13 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-import numpy as np
-
 from ..registry import register
 from .aerial import Aerial, AerialConfig
 
 
 @dataclasses.dataclass
 class QuadcopterConfig(AerialConfig):
-    target_pos: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 1.0])  # [m]
+    target_pos: list[float]  # [m]
 
 
 @register("task", "Quadcopter", QuadcopterConfig)

@@ -27,17 +27,17 @@ _FINGERTIPS = ("ff", "mf", "rf", "lf", "th")
 
 @dataclasses.dataclass
 class ShadowHandConfig(TaskConfig):
-    reset_position_noise: float = 0.01   # cube start position ~ start + U(-n, n) per axis [m]
-    reset_dof_pos_interval: float = 0.2  # joint start ~ interval * U(lower, upper)
-    dist_reward_scale: float = -10.0
-    rot_reward_scale: float = 1.0
-    rot_eps: float = 0.1
-    action_penalty_scale: float = -0.0002
-    reach_goal_bonus: float = 250.0
-    success_tolerance: float = 0.1       # [rad]
-    fall_distance: float = 0.24          # [m] from the goal position ends the episode
-    fall_penalty: float = 0.0
-    vel_obs_scale: float = 0.2
+    reset_position_noise: float  # cube start position ~ start + U(-n, n) per axis [m]
+    reset_dof_pos_interval: float  # joint start ~ interval * U(lower, upper)
+    dist_reward_scale: float
+    rot_reward_scale: float
+    rot_eps: float
+    action_penalty_scale: float
+    reach_goal_bonus: float
+    success_tolerance: float  # [rad]
+    fall_distance: float  # [m] from the goal position ends the episode
+    fall_penalty: float
+    vel_obs_scale: float
 
 
 @register("task", "ShadowHand", ShadowHandConfig)

@@ -6,10 +6,12 @@ import math
 
 import torch
 
+from .base import ParameterDistribution
+from .box import inside, restrict_log_prob
 from .rejection import sample_by_rejection
 
 
-class Restricted:
+class Restricted(ParameterDistribution):
     """dist restricted to [low, high]; the mass inside is a Monte Carlo estimate from `num_mc` draws,
     sampling is exact by rejection."""
 
@@ -18,7 +20,7 @@ class Restricted:
         self.dist, self.low, self.high = dist, low.double(), high.double()
         with torch.random.fork_rng():
             torch.manual_seed(seed)
-            hits = int(self._inside(dist.sample((num_mc,)).double()).sum())
+            hits = int(inside(dist.sample((num_mc,)).double(), self.low, self.high).sum())
         if hits < min_hits:
             # rejection would need about num_mc / hits draws per sample: refuse rather than exhaust memory
             raise ValueError(f"the posterior puts {hits} of {num_mc} draws inside the prior's support (fewer than "
@@ -27,27 +29,17 @@ class Restricted:
         self.mass_inside = hits / num_mc
         self._log_mass = math.log(self.mass_inside)
 
-    def _inside(self, theta: torch.Tensor) -> torch.Tensor:
-        return ((theta >= self.low) & (theta <= self.high)).all(-1)
-
     @property
     def dim(self) -> int:
         return self.low.shape[0]
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         theta = theta.double()
-        lp = self.dist.log_prob(theta).double() - self._log_mass
-        return torch.where(self._inside(theta), lp, torch.tensor(-torch.inf, dtype=lp.dtype))
+        return restrict_log_prob(self.dist.log_prob(theta).double() - self._log_mass, theta, self.low, self.high)
 
     @torch.no_grad()
-    def sample(self, shape: tuple[int, ...] = (1,)) -> torch.Tensor:
+    def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         n = math.prod(shape)
-        draws = sample_by_rejection(lambda b: self.dist.sample((b,)).double(), self._inside, n, self.mass_inside)
+        draws = sample_by_rejection(lambda b: self.dist.sample((b,), generator=generator).double(),
+                                    lambda t: inside(t, self.low, self.high), n, self.mass_inside)
         return draws.reshape(*shape, self.dim)
-
-    def moments(self, num: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
-        """Monte Carlo mean and standard deviation (fixed seed, so repeatable)."""
-        with torch.random.fork_rng():
-            torch.manual_seed(12345)
-            s = self.sample((num,))
-        return s.mean(0), s.std(0)

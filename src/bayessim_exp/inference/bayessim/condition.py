@@ -3,15 +3,15 @@
 For i.i.d. real summaries x_1..x_n and a model trained on simulations from `proposal`,
 p(theta | x_1..x_n) is proportional to p(theta) * prod_i q(theta | x_i) / proposal(theta)
 (SNPE-A; the product of per-trajectory posteriors over p^(n-1) when the proposal is the prior).
-models/correction.py computes it, in closed form where it exists; docs/statistics.md explains.
+correction.py computes it, in closed form where it exists; docs/statistics.md explains.
 """
 
 from __future__ import annotations
 
 import torch
 
-from ..models.base import PosteriorModel
-from ..models.correction import posterior
+from ...models.base import PosteriorModel
+from .correction import posterior
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,

@@ -13,22 +13,22 @@ mixture (pruned to `max_components` after every factor), and the Gaussian ratio
 N(mu0, S0) / prod N(mu_i, S_i) adds Lambda = S0^-1 - sum S_i^-1 to every component's precision.
 When a component's precision is not positive definite, or a factor is not Gaussian (flows,
 log-uniform priors, mixture proposals), the same unnormalised density is used exactly through
-importance sampling (models/importance.py), and a warning says so.
+importance sampling (distributions/importance.py), and a warning says so.
 See docs/statistics.md for the assumptions.
 """
 
 from __future__ import annotations
 
 import logging
-from typing import Sequence
+from collections.abc import Sequence
 
 import torch
 
-from ..priors import BoxUniform, GaussianPrior
-from .importance import DefensiveMixture, ImportancePosterior
-from .mixture import GaussianMixture, TruncatedMixture
-from .proposals import TruncatedPrior
-from .restricted import Restricted
+from ...distributions.importance import DefensiveMixture, ImportancePosterior
+from ...distributions.independent import BoxUniform, GaussianPrior
+from ...distributions.mixture import GaussianMixture, TruncatedMixture
+from ...distributions.restricted import Restricted
+from ...distributions.truncated_prior import TruncatedPrior
 
 log = logging.getLogger(__name__)
 
@@ -51,8 +51,10 @@ def _gaussian_factor(dist) -> tuple[torch.Tensor, torch.Tensor] | None | str:
 
 
 def _box(dist) -> tuple[torch.Tensor, torch.Tensor] | None:
-    low, high = getattr(dist, "low", None), getattr(dist, "high", None)
-    return None if low is None or high is None else (torch.as_tensor(low).double(), torch.as_tensor(high).double())
+    """The support box of a distribution; None for an improper flat prior or an unbounded one."""
+    if dist is None or dist.low is None:
+        return None
+    return dist.low.double(), dist.high.double()
 
 
 def _needs_no_correction(proposal, prior) -> bool:
@@ -132,14 +134,6 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     prior_power = 1 - (n - len(corrected))  # p * prod over uncorrected factors of 1/p
     box = _box(prior)
 
-    def log_target(theta: torch.Tensor) -> torch.Tensor:
-        theta = theta.double()
-        lp = torch.zeros(theta.shape[:-1], dtype=torch.float64) if prior is None else prior.log_prob(theta).double()
-        out = sum(q.log_prob(theta).double() for q in conditionals) + (prior_power * lp if prior_power else 0.0)
-        for p in corrected:
-            out = out - p.log_prob(theta).double()
-        return torch.where(torch.isfinite(lp), out, torch.tensor(-torch.inf, dtype=out.dtype))
-
     reason = _closed_form_obstacle(conditionals, prior, prior_power, corrected)
     if reason is None:
         mix = _product(conditionals, max_components)
@@ -154,10 +148,29 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     base_mix = _product([_moment_gaussian(q) for q in conditionals], max_components)
     inflated = GaussianMixture(base_mix.log_weights, base_mix.means, _INFLATE * base_mix.covs)
     parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
+    log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected)
     result = ImportancePosterior(log_target, DefensiveMixture(parts), num=_IS_DRAWS, seed=seed)
     log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample size %.0f",
                 reason, _IS_DRAWS, result.ess)
     return result
+
+
+class CorrectedProduct:
+    """log p(theta)^prior_power + sum_i log q_i(theta | x_i) - sum_j log p~_j(theta), up to a constant;
+    -inf outside the prior's support. A class, not a closure, so posteriors built on it can be saved."""
+
+    def __init__(self, conditionals: list, prior, prior_power: int, corrected: list):
+        self.conditionals, self.prior, self.prior_power, self.corrected = conditionals, prior, prior_power, corrected
+
+    def __call__(self, theta: torch.Tensor) -> torch.Tensor:
+        theta = theta.double()
+        lp = torch.zeros(theta.shape[:-1], dtype=torch.float64) if self.prior is None else self.prior.log_prob(theta).double()
+        out = sum(q.log_prob(theta).double() for q in self.conditionals)
+        if self.prior_power:
+            out = out + self.prior_power * lp
+        for p in self.corrected:
+            out = out - p.log_prob(theta).double()
+        return torch.where(torch.isfinite(lp), out, torch.tensor(-torch.inf, dtype=out.dtype))
 
 
 def _closed_form_obstacle(conditionals, prior, prior_power: int, corrected: list) -> str | None:

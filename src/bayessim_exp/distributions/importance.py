@@ -9,9 +9,11 @@ sampling-importance-resampling over a fixed pool of base draws.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import torch
+
+from .base import ParameterDistribution
 
 
 def _draw(dist, num: int, seed: int) -> torch.Tensor:
@@ -20,7 +22,7 @@ def _draw(dist, num: int, seed: int) -> torch.Tensor:
         return dist.sample((num,)).double()
 
 
-class ImportancePosterior:
+class ImportancePosterior(ParameterDistribution):
     """exp(log_target(theta)) / Z with Z estimated from `num` draws of `base`.
 
     `ess` (effective sample size of the pool) says how well the base covers the target: the
@@ -52,27 +54,34 @@ class ImportancePosterior:
         idx = torch.multinomial(self._weights, n, replacement=True, generator=generator or self._generator)
         return self._pool[idx].reshape(*shape, self.dim)
 
-    def moments(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Self-normalised importance estimates of the mean and standard deviation over the pool."""
-        mean = (self._weights[:, None] * self._pool).sum(0)
-        var = (self._weights[:, None] * (self._pool - mean) ** 2).sum(0)
-        return mean, var.sqrt()
+    @property
+    def mean(self) -> torch.Tensor:
+        """Self-normalised importance estimate over the pool."""
+        return (self._weights[:, None] * self._pool).sum(0)
+
+    @property
+    def stddev(self) -> torch.Tensor:
+        return (self._weights[:, None] * (self._pool - self.mean) ** 2).sum(0).sqrt()
 
 
-class DefensiveMixture:
+class DefensiveMixture(ParameterDistribution):
     """An equal-weight mixture of arbitrary distributions: an importance base whose tails cover each part's."""
 
     def __init__(self, parts: list):
         self.parts = parts
 
-    def sample(self, shape: tuple[int, ...] = (1,)) -> torch.Tensor:
+    @property
+    def dim(self) -> int:
+        return self.parts[0].dim
+
+    def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         n = math.prod(shape)
-        which = torch.randint(len(self.parts), (n,))
-        out = torch.empty(n, self.parts[0].sample((1,)).shape[-1], dtype=torch.float64)
+        which = torch.randint(len(self.parts), (n,), generator=generator)
+        out = torch.empty(n, self.dim, dtype=torch.float64)
         for j, part in enumerate(self.parts):
             mask = which == j
             if mask.any():
-                out[mask] = part.sample((int(mask.sum()),)).double()
+                out[mask] = part.sample((int(mask.sum()),), generator=generator).double()
         return out.reshape(*shape, out.shape[-1])
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:

@@ -11,7 +11,9 @@ import math
 
 import torch
 
-from .box_gaussian import ghk
+from .base import ParameterDistribution
+from .box import inside, restrict_log_prob
+from .ghk import ghk
 from .rejection import sample_by_rejection
 
 log = logging.getLogger(__name__)
@@ -40,7 +42,7 @@ def _cholesky(covs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     raise ValueError("a mixture component's covariance is not positive definite, even with jitter")
 
 
-class GaussianMixture:
+class GaussianMixture(ParameterDistribution):
     """sum_k w_k N(mean_k, cov_k) over R^D, float64."""
 
     def __init__(self, logits: torch.Tensor, means: torch.Tensor, covs: torch.Tensor):
@@ -91,12 +93,16 @@ class GaussianMixture:
         d = self.means - mu
         return (w[:, None, None] * (self.covs + d[:, :, None] * d[:, None, :])).sum(0)
 
-    def affine(self, shift: torch.Tensor, scale: torch.Tensor) -> "GaussianMixture":
+    @property
+    def stddev(self) -> torch.Tensor:
+        return torch.diagonal(self.covariance).sqrt()
+
+    def affine(self, shift: torch.Tensor, scale: torch.Tensor) -> GaussianMixture:
         """The mixture of shift + scale * theta (scale a vector: a diagonal map)."""
         s = scale.double()
         return GaussianMixture(self.log_weights, self.means * s + shift.double(), self.covs * s[:, None] * s[None, :])
 
-    def product(self, other: "GaussianMixture") -> "GaussianMixture":
+    def product(self, other: GaussianMixture) -> GaussianMixture:
         """The normalised product density p(theta) * q(theta) / Z, a mixture of K1*K2 Gaussians.
 
         N(a, A) N(b, B) = N(a; b, A + B) * N(c, C) with C = (A^-1 + B^-1)^-1, c = C (A^-1 a + B^-1 b).
@@ -115,28 +121,21 @@ class GaussianMixture:
         d = self.dim
         return GaussianMixture(logits.reshape(-1), c.reshape(-1, d), C.reshape(-1, d, d))
 
-    def prune(self, max_components: int) -> "GaussianMixture":
+    def prune(self, max_components: int) -> GaussianMixture:
         """Keep the heaviest components (renormalised)."""
         if self.num_components <= max_components:
             return self
         keep = torch.topk(self.log_weights, max_components).indices
         return GaussianMixture(self.log_weights[keep], self.means[keep], self.covs[keep])
 
-    def state_dict(self) -> dict:
-        return {"log_weights": self.log_weights, "means": self.means, "covs": self.covs}
 
-    @classmethod
-    def from_state_dict(cls, state: dict) -> "GaussianMixture":
-        return cls(state["log_weights"], state["means"], state["covs"])
-
-
-class TruncatedMixture:
+class TruncatedMixture(ParameterDistribution):
     """A mixture restricted to the box [low, high] and renormalised.
 
     The normaliser P(box) is estimated once by Monte Carlo with `num_mc` draws, and sampling is
     exact, by rejection. When fewer than `min_hits` of those draws land inside (a posterior in
     many dimensions, or one far from the box), each component's box probability is estimated by
-    the GHK simulator instead (models/box_gaussian.py, `num_mc` // 50 weighted draws per
+    the GHK simulator instead (distributions/ghk.py, `num_mc` // 50 weighted draws per
     component) and draws come from GHK importance resampling: exact as the draws grow, and
     repeatable.
     """
@@ -146,7 +145,7 @@ class TruncatedMixture:
         self.mixture = mixture
         self.low, self.high = low.double(), high.double()
         g = torch.Generator().manual_seed(seed)
-        hits = int(self._inside(mixture.sample((num_mc,), generator=g)).sum())
+        hits = int(inside(mixture.sample((num_mc,), generator=g), self.low, self.high).sum())
         self.by_rejection = hits >= min_hits
         if self.by_rejection:
             self.component_log_mass = None
@@ -169,24 +168,20 @@ class TruncatedMixture:
     def log_mass_inside(self) -> float:
         return self._log_mass
 
-    def _inside(self, theta: torch.Tensor) -> torch.Tensor:
-        return ((theta >= self.low) & (theta <= self.high)).all(-1)
-
     @property
     def dim(self) -> int:
         return self.mixture.dim
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         theta = theta.double()
-        lp = self.mixture.log_prob(theta) - self._log_mass
-        return torch.where(self._inside(theta), lp, torch.tensor(-torch.inf, dtype=lp.dtype))
+        return restrict_log_prob(self.mixture.log_prob(theta) - self._log_mass, theta, self.low, self.high)
 
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         g = generator or self._generator
         n = math.prod(shape)
         if self.by_rejection:
-            draws = sample_by_rejection(lambda b: self.mixture.sample((b,), generator=g), self._inside, n,
-                                        math.exp(self._log_mass))
+            draws = sample_by_rejection(lambda b: self.mixture.sample((b,), generator=g),
+                                        lambda t: inside(t, self.low, self.high), n, math.exp(self._log_mass))
         else:
             draws = self._resampled(n, g)
         return draws.reshape(*shape, self.dim)
@@ -203,15 +198,3 @@ class TruncatedMixture:
             pick = torch.multinomial(torch.softmax(log_w, 0), int(counts[k]), replacement=True, generator=g)
             out.append(theta[pick])
         return torch.cat(out)[torch.randperm(n, generator=g)]
-
-    def moments(self, num: int = 20_000) -> tuple[torch.Tensor, torch.Tensor]:
-        """Monte Carlo mean and standard deviation (fixed seed, so repeatable)."""
-        s = self.sample((num,), generator=torch.Generator().manual_seed(12345))
-        return s.mean(0), s.std(0)
-
-    def state_dict(self) -> dict:
-        return {"mixture": self.mixture.state_dict(), "low": self.low, "high": self.high}
-
-    @classmethod
-    def from_state_dict(cls, state: dict) -> "TruncatedMixture":
-        return cls(GaussianMixture.from_state_dict(state["mixture"]), state["low"], state["high"])

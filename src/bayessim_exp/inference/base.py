@@ -1,0 +1,42 @@
+"""The interface of an inference method: how a round turns simulations and real data into a new
+distribution over the simulator's parameters.
+
+The pipeline owns the loop, seeds, artifacts and logging; a method contributes
+
+    stages()         the named stages of its round, run after the `real` stage (which records new
+                     real trajectories, kept raw across rounds: `real_trajectories(ctx)`)
+    proposal(ctx)    the distribution the round simulates parameters from
+    posterior(ctx)   the new distribution after the round, from its artifacts (a ParameterDistribution:
+                     scored, plotted and handed to domain randomization like any other)
+    record(ctx)      method-specific fields of the round's entry in results.json
+
+Methods are a config group (`method=bayessim`); a researcher's own is registered with
+`registry.register("method", name, ConfigDataclass)` on a factory `(cfg, comp) -> InferenceMethod`.
+"""
+
+from __future__ import annotations
+
+import abc
+
+from ..distributions.base import ParameterDistribution
+from ..sim.trajectories import Trajectories
+from ..stages import RoundContext, Stage
+
+
+class InferenceMethod(abc.ABC):
+    @abc.abstractmethod
+    def stages(self) -> list[Stage]: ...
+
+    @abc.abstractmethod
+    def proposal(self, ctx: RoundContext) -> ParameterDistribution: ...
+
+    @abc.abstractmethod
+    def posterior(self, ctx: RoundContext) -> ParameterDistribution: ...
+
+    def record(self, ctx: RoundContext) -> dict:
+        return {}
+
+
+def real_trajectories(ctx: RoundContext) -> Trajectories:
+    """Every real trajectory recorded up to and including this round."""
+    return Trajectories(**ctx.output("real")["traj"])

@@ -1,0 +1,178 @@
+"""BayesSim (Ramos et al. 2019) as an inference method: simulate from a proposal, summarize, fit
+q(theta | x), condition on every real summary with the proposal's correction.
+
+Stages of a round: collect (parameters from the proposal, trajectories under the collect policy)
+-> summarize -> fit (the posterior model; held-out simulations give its expected coverage) ->
+condition (the posterior given all real trajectories, docs/statistics.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import torch
+
+from ...diagnostics.coverage import expected_coverage
+from ...diagnostics.predictive import predictive_distances
+from ...distributions.base import ParameterDistribution
+from ...distributions.truncated_prior import TruncatedPrior
+from ...errors import ConfigError, PosteriorError
+from ...registry import register
+from ...sim.trajectories import Trajectories
+from ...stages import RoundContext, Stage, stage_seed
+from ..base import InferenceMethod, real_trajectories
+from .condition import condition
+from .proposals import moment_matched
+
+log = logging.getLogger(__name__)
+
+# proposal -> how rounds after the first draw their parameters (docs/statistics.md):
+#   prior      always the prior; every round's simulations train the model
+#   posterior  the previous posterior itself (SNPE-A; closed form only for one-component mixtures)
+#   gaussian   the previous posterior moment-matched to one Gaussian (SNPE-A in closed form for mixtures)
+#   truncated  the prior restricted to the previous posterior's 99.9 % HPD region (TSNPE, no correction)
+PROPOSALS = ("prior", "posterior", "gaussian", "truncated")
+# SNPE-A needs the model trained on draws from a single proposal: the current round's simulations only
+_SINGLE_ROUND_PROPOSALS = ("posterior", "gaussian")
+
+
+@dataclasses.dataclass
+class BayesSimConfig:
+    proposal: str  # prior | posterior | gaussian | truncated
+    finetune: bool  # continue training the previous round's model (false: re-initialise)
+    max_components: int  # mixture components kept when combining several real trajectories
+
+    def validate(self) -> None:
+        if self.proposal not in PROPOSALS:
+            raise ConfigError(f"proposal={self.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
+        if self.max_components < 1:
+            raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
+
+
+class BayesSim(InferenceMethod):
+    def __init__(self, cfg: BayesSimConfig, comp):
+        self.cfg, self.comp = cfg, comp
+        self._proposals: dict[int, ParameterDistribution | None] = {}
+
+    def stages(self) -> list[Stage]:
+        return [
+            Stage("collect", self.collect, transient=not self.comp.rc.collect.keep_trajectories),
+            Stage("summarize", self.summarize, inputs=("collect",)),
+            Stage("fit", self.fit, inputs=("summarize",)),
+            Stage("condition", self.condition, inputs=("real", "fit")),
+        ]
+
+    # proposals -----------------------------------------------------------------------
+    def proposal(self, ctx: RoundContext) -> ParameterDistribution:
+        """The distribution round r draws its parameters from (see PROPOSALS)."""
+        return self.comp.prior if self.proposal_name(ctx) == "prior" else self._proposals[ctx.round]
+
+    def proposal_name(self, ctx: RoundContext) -> str:
+        """The proposal round r really uses: `truncated` falls back to the prior when the previous
+        posterior's region is too small a share of it to sample (many parameters)."""
+        r = ctx.round
+        if r == 1 or self.cfg.proposal == "prior":
+            return "prior"
+        if r not in self._proposals:
+            previous = ctx.output("condition", r - 1)["posterior"]
+            seed = stage_seed(ctx.run_seed, r, "proposal")  # fixed per round, whichever stage asks first
+            if self.cfg.proposal == "truncated":
+                try:
+                    self._proposals[r] = TruncatedPrior(self.comp.prior, previous, seed=seed)
+                except ValueError as exc:
+                    log.warning("round %d: %s; simulating from the prior instead", r, exc)
+                    self._proposals[r] = None
+            elif self.cfg.proposal == "gaussian":
+                self._proposals[r] = moment_matched(previous, self.comp.prior.low, self.comp.prior.high, seed=seed)
+            else:
+                self._proposals[r] = previous
+        return "prior" if self._proposals[r] is None else self.cfg.proposal
+
+    # stages --------------------------------------------------------------------------
+    def collect(self, ctx: RoundContext) -> dict:
+        rc = self.comp.rc
+        theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
+        traj = self.comp.sims.rollout(theta, self.comp.policy(ctx), rc.collect.horizon, ctx.seed,
+                                      rc.logging.progress)
+        return {"theta": theta.float(), "traj": traj.state_dict()}
+
+    def summarize(self, ctx: RoundContext) -> dict:
+        collected = ctx.output("collect")
+        traj = Trajectories(**collected["traj"]).to(self.comp.device)
+        keep = ~traj.diverged
+        x = self.comp.summarizer(traj.select(keep)).cpu()
+        finite = torch.isfinite(x).all(1)
+        theta = collected["theta"][keep.cpu()][finite]
+        return {"theta": theta, "x": x[finite], "diverged": int((~keep).sum()) + int((~finite).sum())}
+
+    def fit(self, ctx: RoundContext) -> dict:
+        r = ctx.round
+        first = r if self.cfg.proposal in _SINGLE_ROUND_PROPOSALS else 1
+        data = [self._split(ctx.output("summarize", k)) for k in range(first, r + 1)]
+        theta, x = torch.cat([d[0] for d in data]), torch.cat([d[1] for d in data])
+        model = self.comp.model()
+        if r > 1 and self.cfg.finetune:
+            model.load_state_dict(ctx.output("fit", r - 1)["model"])
+        history = model.fit(theta, x, seed=ctx.seed, label=f"round {r}")
+        ctx.tb.losses(r, history)
+        theta_val, x_val = data[-1][2], data[-1][3]
+        d = self.comp.rc.diagnostics
+        coverage = None if len(theta_val) == 0 else expected_coverage(
+            model, theta_val, x_val, d.levels, d.coverage_samples, seed=ctx.seed)
+        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage}
+
+    def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
+        """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
+        n_val = int(self.comp.rc.diagnostics.held_out_fraction * len(summary["theta"]))
+        cut = len(summary["theta"]) - n_val
+        return summary["theta"][:cut], summary["x"][:cut], summary["theta"][cut:], summary["x"][cut:]
+
+    def condition(self, ctx: RoundContext) -> dict:
+        model = self.comp.model()
+        model.load_state_dict(ctx.output("fit")["model"])
+        real = real_trajectories(ctx)
+        x_real = self.comp.summarizer(real.to(self.comp.device)).cpu()
+        try:
+            post = condition(model, x_real, self.comp.prior, self.cfg.max_components,
+                             proposal=self.proposal(ctx), seed=ctx.seed)
+        except ValueError as exc:
+            raise PosteriorError(f"round {ctx.round}: {exc}") from exc
+        return {"posterior": post, "x_real": x_real, "predictive_distance": self._predictive(ctx, post, x_real)}
+
+    def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
+        num = self.comp.rc.diagnostics.predictive_sims
+        if num == 0:
+            return None
+
+        def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
+            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx), self.comp.rc.collect.horizon,
+                                          ctx.seed).to(self.comp.device)
+            x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
+            return x[torch.isfinite(x).all(1)]
+
+        return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, ctx.seed)
+
+    # results -------------------------------------------------------------------------
+    def posterior(self, ctx: RoundContext) -> ParameterDistribution:
+        return ctx.output("condition")["posterior"]
+
+    def record(self, ctx: RoundContext) -> dict:
+        summary, fitted = ctx.output("summarize"), ctx.output("fit")
+        hist = fitted["history"]
+        return {
+            "sim_trajectories": self.comp.rc.collect.trajectories,
+            "train_set_size": fitted["num_train"],
+            "diverged": summary["diverged"],
+            "epochs": hist["epochs"],
+            "train_loss": hist["train"][-1],
+            "val_loss": hist["best_val"],
+            "proposal": self.proposal_name(ctx),
+            "coverage": fitted["coverage"],
+            "predictive_distance": ctx.output("condition")["predictive_distance"],
+        }
+
+
+@register("method", "bayessim", BayesSimConfig)
+def bayessim(cfg: BayesSimConfig, comp) -> BayesSim:
+    return BayesSim(cfg, comp)

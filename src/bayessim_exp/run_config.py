@@ -1,0 +1,80 @@
+"""The top-level keys of a run that are not component groups: their types (defaults: conf/config.yaml)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from . import registry
+from .errors import ConfigError
+
+
+@dataclasses.dataclass
+class CollectConfig:
+    trajectories: int  # simulated trajectories per round
+    horizon: int  # control steps per trajectory
+    chunk: int  # environments simulated at once
+    keep_trajectories: bool  # keep raw simulated trajectories after summarizing
+
+
+@dataclasses.dataclass
+class DiagnosticsConfig:
+    held_out_fraction: float  # of each round's simulations, kept out of training for the coverage check
+    coverage_samples: int  # posterior draws per held-out simulation
+    levels: list[float]
+    predictive_sims: int  # simulations at posterior and at prior draws for the predictive check (0: off)
+
+
+@dataclasses.dataclass
+class LoggingConfig:
+    plot_params: Any  # list of names, or None for the first max_plot_params
+    max_plot_params: int
+    plot_samples: int
+    progress: bool
+
+
+@dataclasses.dataclass
+class RunConfig:
+    seed: int
+    rounds: int
+    device: str
+    plugins: list[str]
+    run_name: str
+    collect: CollectConfig
+    diagnostics: DiagnosticsConfig
+    logging: LoggingConfig
+
+
+# keys renamed in 0.2, with the new name to suggest
+RENAMED = {"iterations": "rounds", "ftune": "method.finetune", "proposal": "method.proposal",
+           "condition": "method.max_components"}
+
+
+def check_run_config(cfg: DictConfig) -> RunConfig:
+    top = {k: v for k, v in OmegaConf.to_container(cfg, resolve=True).items() if k not in registry.GROUPS}
+    old = [k for k in top if k in RENAMED]
+    if old:
+        raise ConfigError(f"{old[0]} was renamed to {RENAMED[old[0]]} (README: 'Renamed keys')")
+    try:
+        rc = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(RunConfig), top))
+    except OmegaConfBaseException as exc:
+        raise ConfigError(f"{exc.full_key}={exc.value!r}: {str(exc).splitlines()[0]}") from None
+    c = rc.collect
+    if rc.rounds < 1 or c.trajectories < 20 or c.horizon < 1 or c.chunk < 1:
+        raise ConfigError("need rounds >= 1, collect.trajectories >= 20, collect.horizon >= 1, collect.chunk >= 1")
+    if rc.logging.max_plot_params < 1 or rc.logging.plot_samples < 10:
+        raise ConfigError("need logging.max_plot_params >= 1, logging.plot_samples >= 10")
+    try:
+        torch.device(rc.device)
+    except RuntimeError as exc:
+        raise ConfigError(f"device={rc.device!r} is not a torch device: {exc}") from None
+    d = rc.diagnostics
+    if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
+            or d.predictive_sims < 0):
+        raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
+                          "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0")
+    return rc

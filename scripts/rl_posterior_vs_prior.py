@@ -51,7 +51,7 @@ def main() -> None:
         bayessim_seconds = time.perf_counter() - t0
         posterior = api.load_run(run_dir).posterior()
         row = {"seed": seed, "bayessim_seconds": round(bayessim_seconds, 1),
-               "posterior_mean": posterior.moments()[0].tolist(), "posterior_std": posterior.moments()[1].tolist()}
+               "posterior_mean": posterior.mean.tolist(), "posterior_std": posterior.stddev.tolist()}
         for train_on in ("posterior", "prior", "nominal"):
             cfg = api.compose(overrides + rl_overrides + [f"rl.train_on={train_on}"])
             comp = build_components(cfg, check_run_config(cfg))

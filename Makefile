@@ -2,7 +2,7 @@
 PYTHON ?= python3
 PIP = $(PYTHON) -m pip
 
-.PHONY: help install lint test test-fast
+.PHONY: help install lint test test-fast sweep
 
 help:  ## this list
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -14,8 +14,12 @@ install:  ## torch 2.13.0 (CPU wheel) first, then the package with its dev extra
 lint:  ## ruff over sources, tests and benchmarks (rules in pyproject.toml)
 	$(PYTHON) -m ruff check src tests benchmarks
 
-test:  ## the whole test suite, as CI runs it
-	$(PYTHON) -m pytest -q -n 2 --max-worker-restart=0 tests
+test:  ## the whole test suite, as CI runs it (skip reasons printed)
+	$(PYTHON) -m pytest -q -rs -n 2 --max-worker-restart=0 tests
 
 test-fast:  ## the tests not marked slow
 	$(PYTHON) -m pytest -q -m "not slow" tests
+
+sweep:  ## a study from sweeps/: make sweep SWEEP=<name> [ARGS="debug=smoke hydra/launcher=local"]
+	@test -f "sweeps/$(SWEEP).yaml" || { echo "make sweep SWEEP=<name>; sweeps: $$(ls sweeps | sed 's/\.yaml$$//' | tr '\n' ' ')" >&2; exit 2; }
+	$(PYTHON) -m bayessim_exp --config-dir sweeps --config-name $(SWEEP) --multirun $(ARGS)

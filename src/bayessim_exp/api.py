@@ -22,6 +22,7 @@ from omegaconf import OmegaConf
 from . import registry
 from .distributions.base import ParameterDistribution
 from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
+from .distributions.probit import ProbitTransform
 from .inference.bayessim.condition import condition
 
 __all__ = ["BoxUniform", "GaussianPrior", "LogUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
@@ -37,16 +38,19 @@ class FittedPosterior:
     config: dict
     history: dict
     max_components: int = 50
+    probit: ProbitTransform | None = None  # set when the model was fitted in probit space
 
-    def posterior(self, x_obs: torch.Tensor, proposal=None):
+    def posterior(self, x_obs: torch.Tensor, proposal=None, combination: str = "dispersion"):
         """The posterior given one summary [F] or several i.i.d. ones [n, F]; `proposal`: what the
-        training parameters were drawn from, if not the prior (SNPE-A correction)."""
-        return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components, proposal=proposal)
+        training parameters were drawn from, if not the prior (SNPE-A correction); `combination`: how
+        several summaries are combined (inference/bayessim/combination.py)."""
+        return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components, proposal=proposal,
+                         probit=self.probit, combination=combination)[0]
 
     def save(self, path: str | Path) -> None:
         torch.save({"name": self.name, "config": self.config, "state": self.model.state_dict(),
                     "theta_dim": self.model.theta_dim, "x_dim": self.model.x_dim, "history": self.history,
-                    "prior": self.prior}, path)  # priors are small torch distributions: pickled whole
+                    "prior": self.prior, "probit": self.probit is not None}, path)  # priors are small torch distributions: pickled whole
 
     @classmethod
     def load(cls, path: str | Path) -> FittedPosterior:
@@ -54,18 +58,24 @@ class FittedPosterior:
         model = registry.build("model", {**d["config"], "name": d["name"]},
                                theta_dim=d["theta_dim"], x_dim=d["x_dim"])
         model.load_state_dict(d["state"])
-        return cls(d["name"], model, d["prior"], d["config"], d["history"])
+        probit = ProbitTransform(d["prior"]) if d.get("probit") else None
+        return cls(d["name"], model, d["prior"], d["config"], d["history"], probit=probit)
 
 
 def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=None, seed: int = 0,
-                        **cfg: Any) -> FittedPosterior:
+                        probit: bool = False, **cfg: Any) -> FittedPosterior:
     """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg overrides the defaults in
-    conf/model/<name>.yaml."""
+    conf/model/<name>.yaml.
+
+    probit=True fits the model to the parameters mapped onto R^D by the prior's marginal CDFs
+    (distributions/probit.py; needs an independent prior on a box); posteriors come back in parameter units.
+    """
     theta, x = torch.as_tensor(theta), torch.as_tensor(x)
-    model = registry.build("model", {**cfg, "name": name},
-                           theta_dim=theta.shape[1], x_dim=x.shape[1])
-    history = model.fit(theta, x, seed=seed, label=name)
-    return FittedPosterior(name, model, prior, cfg, history)
+    transform = ProbitTransform(prior) if probit else None
+    model = registry.build("model", {**cfg, "name": name}, theta_dim=theta.shape[1], x_dim=x.shape[1])
+    target = theta if transform is None else transform.to_probit(theta)
+    history = model.fit(target, x, seed=seed, label=name)
+    return FittedPosterior(name, model, prior, cfg, history, probit=transform)
 
 
 def compose(overrides: list[str] | None = None):

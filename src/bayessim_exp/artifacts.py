@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -52,7 +53,21 @@ class RunDir:
         return torch.load(self.stage_file(round_index, stage), weights_only=False)
 
     def write_json(self, name: str, obj: Any) -> None:
-        _atomic_write(self.path / name, lambda f: f.write(json.dumps(obj, indent=2).encode()))
+        """Strict JSON: NaN and infinities (e.g. the log density of a point outside the support) become null."""
+        text = json.dumps(_finite_or_null(obj), indent=2, allow_nan=False)
+        _atomic_write(self.path / name, lambda f: f.write(text.encode()))
+
+    def bind_fingerprint(self, name: str, fingerprint: str | None) -> None:
+        """Record the hash of an input outside the config (a data file); a run dir made from other
+        contents is refused, as one made with another config is."""
+        if fingerprint is None:
+            return
+        stored = self.path / f"{name.replace(' ', '_')}.sha256"
+        if stored.is_file() and stored.read_text().strip() != fingerprint:
+            raise ConfigError(f"{self.path} holds a run made from other {name} (SHA-256 {stored.read_text().strip()[:12]}..., "
+                              f"now {fingerprint[:12]}...); the file changed since: use a new run dir")
+        if not stored.is_file():
+            _atomic_write(stored, lambda f: f.write(fingerprint.encode()))
 
     def bind_config(self, cfg: DictConfig) -> None:
         """Record the config; a run dir that holds another config's stages is refused."""
@@ -68,6 +83,16 @@ class RunDir:
                 )
             return
         _atomic_write(stored, lambda f: f.write(text.encode()))
+
+
+def _finite_or_null(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_null(v) for v in obj]
+    return obj
 
 
 def _diff_keys(a: Any, b: Any, prefix: str = "") -> set[str]:

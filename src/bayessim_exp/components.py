@@ -33,10 +33,10 @@ class Components:
     def device(self) -> torch.device:
         return torch.device(self.rc.device)
 
-    def policy(self, ctx):
-        """The collect policy, seeded by the stage; `rl`/`rl_randomized` act with the latest trained actor."""
-        actor = self.rl.actor(ctx) if self.rl is not None else None
-        return registry.build("policy", self.cfg.policy, action_dim=self.task.action_dim, seed=ctx.seed,
+    def policy(self, seed: int, ctx=None):
+        """The collect policy, seeded; within a round (ctx) `rl`/`rl_randomized` act with the latest trained actor."""
+        actor = self.rl.actor(ctx) if self.rl is not None and ctx is not None else None
+        return registry.build("policy", self.cfg.policy, action_dim=self.task.action_dim, seed=seed,
                               control_dt=self.task.cfg.control_dt, actor=actor)
 
     def model(self):
@@ -61,6 +61,7 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     registry.parse_params("policy", cfg.policy)
     registry.parse_params("model", cfg.model)
     real = registry.build("real", cfg.real, task=task, sims=sims)
+    real.check(rc.collect.horizon)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)
     comp = Components(cfg, rc, task, prior, sims, summarizer, real, x_dim)

@@ -38,6 +38,7 @@ class Pipeline:
         self.comp: Components = build_components(cfg, self.rc)
         self.run_dir = RunDir(out_dir)
         self.run_dir.bind_config(cfg)
+        self.run_dir.bind_fingerprint("real data", self.comp.real.fingerprint)
         self.stages = [Stage("real", self.real), *self.comp.method.stages(), Stage("score", self.score),
                        *(self.comp.rl.stages() if self.comp.rl is not None else [])]
         check_stages(self.stages)
@@ -55,7 +56,7 @@ class Pipeline:
     # the stages the pipeline owns ------------------------------------------------------
     def real(self, ctx: RoundContext) -> dict:
         """New real trajectories under the collect policy, appended to the earlier rounds' (kept raw)."""
-        traj = self.comp.real.collect(ctx.round, self.comp.policy(ctx), self.rc.collect.horizon, ctx.seed)
+        traj = self.comp.real.collect(ctx.round, self.comp.policy(ctx.seed, ctx), self.rc.collect.horizon, ctx.seed)
         previous = Trajectories(**ctx.output("real", ctx.round - 1)["traj"]) if ctx.round > 1 else None
         if traj is None:
             if previous is None:

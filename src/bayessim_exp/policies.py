@@ -31,6 +31,12 @@ class RandomPolicy:
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         return torch.rand(obs.shape[0], self.action_dim, generator=self.generator) * 2 - 1
 
+    def open_loop_actions(self, n: int, horizon: int) -> torch.Tensor:
+        """The actions [n, horizon, A] that `horizon` calls of act() would give (the observations are
+        never read), so a simulator can run the whole rollout in one compiled loop."""
+        dummy = torch.empty(n, 0)
+        return torch.stack([self.act(dummy, t) for t in range(horizon)], 1)
+
 
 @dataclasses.dataclass
 class RandomPolicyConfig:
@@ -40,6 +46,17 @@ class RandomPolicyConfig:
 @register("policy", "random", RandomPolicyConfig)
 def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int, **_: object) -> RandomPolicy:
     return RandomPolicy(action_dim, seed)
+
+
+class OpenLoopPolicy:
+    """Recorded actions [N, T, A] played step by step, whatever the observations (replaying real
+    trajectories in simulation)."""
+
+    def __init__(self, actions: torch.Tensor):
+        self.actions = actions
+
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        return self.actions[:, t].to(obs.device)
 
 
 @dataclasses.dataclass

@@ -12,6 +12,8 @@ File format (npz), written by `save_trajectories` or by a robot's logging code:
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +24,8 @@ from .registry import register
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
 from .tasks.base import Task
+
+log = logging.getLogger(__name__)
 
 
 @dataclasses.dataclass
@@ -41,9 +45,14 @@ class FileConfig:
 class SurrogateReal:
     """A simulated 'real' system with the task's real_params, which the inference never sees."""
 
+    fingerprint = None  # nothing outside the config to bind to the run dir
+
     def __init__(self, cfg: SurrogateConfig, task: Task, sims: SimulatorPool):
         self.cfg, self.task, self.sims = cfg, task, sims
         self.true_params: np.ndarray | None = task.real_values
+
+    def check(self, horizon: int) -> None:
+        """Nothing to check: the task's config was validated when it was built."""
 
     def collect(self, round_index: int, policy, horizon: int, seed: int) -> Trajectories:
         params = np.repeat(self.true_params[None], self.cfg.per_round, 0)
@@ -54,7 +63,10 @@ class SurrogateReal:
 
 
 class FileReal:
-    """Trajectories recorded on a real system, all given in the first round."""
+    """Trajectories recorded on a real system, all given in the first round.
+
+    The file is read and checked against the task and collect.horizon when the run is built
+    (`check`), before any simulation; its SHA-256 (`fingerprint`) binds it to the run dir."""
 
     def __init__(self, cfg: FileConfig, task: Task):
         if cfg.path in ("???", ""):
@@ -63,23 +75,45 @@ class FileReal:
         if not self.path.is_file():
             raise ConfigError(f"real.path={cfg.path!r}: no such file")
         self.task = task
-        with np.load(self.path, allow_pickle=False) as data:
-            self._data = {k: data[k] for k in data.files}
+        self.fingerprint = hashlib.sha256(self.path.read_bytes()).hexdigest()
+        try:
+            with np.load(self.path, allow_pickle=False) as data:
+                self._data = {k: data[k] for k in data.files}
+        except (OSError, ValueError) as exc:
+            raise DataError(f"{self.path}: not a readable npz file ({exc}); write it with "
+                            "bayessim_exp.real.save_trajectories or numpy.savez") from None
         self.true_params = self._true_params()
+        self._trajectories: Trajectories | None = None
 
     def _true_params(self) -> np.ndarray | None:
         if "params" not in self._data:
             return None
-        names = [str(n) for n in self._data.get("param_names", self.task.spec.names)]
-        values = dict(zip(names, np.asarray(self._data["params"], dtype=float).ravel()))
-        if set(values) != set(self.task.spec.names):
-            return None  # recorded for other parameters: nothing to score against
-        return np.array([values[n] for n in self.task.spec.names])
+        spec = self.task.spec
+        names = [str(n) for n in self._data.get("param_names", spec.names)]
+        values = np.asarray(self._data["params"], dtype=float).ravel()
+        if len(names) != len(values) or set(names) != set(spec.names):
+            log.warning("%s: params are given for %s but task %s infers %s; the posterior is not scored against "
+                        "them (name them as the task does in param_names)", self.path, names, self.task.name, spec.names)
+            return None
+        true = np.array([dict(zip(names, values))[n] for n in spec.names])
+        outside = [f"{n}={v:g} not in [{lo:g}, {hi:g}]" for n, v, lo, hi in zip(spec.names, true, spec.low, spec.high)
+                   if not lo <= v <= hi]
+        if outside:
+            log.warning("%s: true parameters outside the prior's box (%s): the posterior has no mass there and its "
+                        "log density at them is reported as null; widen the task's ranges to include them",
+                        self.path, ", ".join(outside))
+        return true
+
+    def check(self, horizon: int) -> None:
+        """Validate the file against the task and the horizon (DataError with how to fix it)."""
+        self._trajectories = load_trajectories(self._data, self.task, horizon, str(self.path))
 
     def collect(self, round_index: int, policy, horizon: int, seed: int) -> Trajectories | None:
         if round_index > 1:
             return None
-        return load_trajectories(self._data, self.task, horizon, str(self.path))
+        if self._trajectories is None:
+            self.check(horizon)
+        return self._trajectories
 
 
 def load_trajectories(data: dict, task: Task, horizon: int, where: str) -> Trajectories:
@@ -88,26 +122,42 @@ def load_trajectories(data: dict, task: Task, horizon: int, where: str) -> Traje
         if key not in data:
             raise DataError(f"{where}: missing array {key!r}; found {sorted(data)}")
     states, actions = np.asarray(data["states"], float), np.asarray(data["actions"], float)
+    obs = f"[n, T+1, {task.obs_dim}] ({', '.join(task.obs_names)})"
+    if states.ndim == 2 and states.shape[1] == task.obs_dim:
+        raise DataError(f"{where}: states has shape {states.shape}, one trajectory without its leading axis; "
+                        f"states must be {obs}: save states[None] and actions[None]")
     if states.ndim != 3 or states.shape[2] != task.obs_dim:
-        raise DataError(
-            f"{where}: states must be [n, T+1, {task.obs_dim}] ({', '.join(task.obs_names)}) for task "
-            f"{task.name}, got {states.shape}"
-        )
+        raise DataError(f"{where}: states must be {obs} for task {task.name}, got {states.shape}")
     n, t1, _ = states.shape
     if actions.shape != (n, t1 - 1, task.action_dim):
-        raise DataError(f"{where}: actions must be [{n}, {t1 - 1}, {task.action_dim}], got {actions.shape}")
-    if "dt" in data and not np.isclose(float(data["dt"]), task.cfg.control_dt, rtol=1e-6):
-        raise DataError(f"{where}: recorded at dt={float(data['dt'])} s but task {task.name} runs at {task.cfg.control_dt} s")
+        raise DataError(f"{where}: actions must be [{n}, {t1 - 1}, {task.action_dim}] (one fewer step than states), "
+                        f"got {actions.shape}")
+    dt = task.cfg.control_dt
+    if "dt" not in data:
+        log.warning("%s: no dt recorded; assuming the task's control timestep %g s", where, dt)
+    elif not np.isclose(float(data["dt"]), dt, rtol=1e-6):
+        raise DataError(f"{where}: recorded at dt={float(data['dt']):g} s but task {task.name} runs at {dt:g} s; "
+                        f"resample the log to {dt:g} s steps (or set task.control_dt if the model allows it)")
     if t1 - 1 < horizon:
-        raise DataError(f"{where}: trajectories have {t1 - 1} steps, fewer than collect.horizon={horizon}")
+        raise DataError(f"{where}: trajectories have {t1 - 1} steps, fewer than collect.horizon={horizon}; "
+                        f"record longer trajectories or run with collect.horizon={t1 - 1} (the summarizer must fit in it)")
     if not (np.isfinite(states).all() and np.isfinite(actions).all()):
         raise DataError(f"{where}: states or actions contain NaN or inf")
-    if np.abs(actions).max(initial=0.0) > 1.0 + 1e-6:
-        raise DataError(f"{where}: actions must be normalised to [-1, 1]; max |a| = {np.abs(actions).max():.3g}")
+    biggest = np.abs(actions).max(initial=0.0)
+    if biggest > 1.0 + 1e-6:
+        lo, hi = task.model.actuator_ctrlrange.T
+        ranges = ", ".join(f"[{a:g}, {b:g}]" for a, b in zip(lo, hi))
+        raise DataError(f"{where}: actions must be normalised to [-1, 1], max |a| = {biggest:.3g}; if they are "
+                        f"actuator commands (e.g. torque), map each u in its control range ({ranges} for {task.name}) "
+                        "to a = (2 u - (high + low)) / (high - low), e.g. divide a symmetric torque by its limit")
+    if t1 - 1 > horizon:
+        log.warning("%s: trajectories have %d steps; only the first collect.horizon=%d are used", where, t1 - 1, horizon)
     valid = np.asarray(data.get("valid", np.ones((n, t1 - 1), bool)), bool)
+    if valid.shape != (n, t1 - 1):
+        raise DataError(f"{where}: valid must be [{n}, {t1 - 1}], got {valid.shape}")
     traj = Trajectories(
         torch.as_tensor(states, dtype=torch.float32), torch.as_tensor(actions, dtype=torch.float32),
-        torch.zeros(n, t1 - 1), torch.as_tensor(valid), torch.zeros(n, dtype=torch.bool), task.cfg.control_dt,
+        torch.zeros(n, t1 - 1), torch.as_tensor(valid), torch.zeros(n, dtype=torch.bool), dt,
     )
     return traj.truncate(horizon)
 

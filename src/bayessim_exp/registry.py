@@ -47,9 +47,13 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.mdnn",
     "bayessim_exp.models.mdrff",
     "bayessim_exp.models.flow",
+    "bayessim_exp.models.linear",
     "bayessim_exp.real",
     "bayessim_exp.inference.bayessim.method",
+    "bayessim_exp.inference.simopt.method",
     "bayessim_exp.sim.native",
+    "bayessim_exp.sim.mjx",
+    "bayessim_exp.sim.auto",
     "bayessim_exp.rl.none",
     "bayessim_exp.rl.config",
 )

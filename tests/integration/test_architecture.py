@@ -45,7 +45,7 @@ PLUGIN = textwrap.dedent('''
         def simulate(self, ctx):
             theta = self.proposal(ctx).sample((self.comp.rc.collect.trajectories,),
                                               generator=torch.Generator().manual_seed(ctx.seed))
-            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx), self.comp.rc.collect.horizon, ctx.seed)
+            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed), self.comp.rc.collect.horizon, ctx.seed)
             return {"theta": theta, "x": self.comp.summarizer(traj)}
 
         def accept(self, ctx):

@@ -1,5 +1,6 @@
-"""Every shipped config builds: each option of each group, each experiment and each stored sweep; and
-each option's defaults are written once, in its YAML (its dataclass gives only the types)."""
+"""Every shipped config builds: each option of each group and each experiment (stored sweeps:
+test_sweep_configs.py); and each option's defaults are written once, in its YAML (its dataclass
+gives only the types)."""
 
 import dataclasses
 from pathlib import Path
@@ -7,15 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hydra import compose as hydra_compose
-from hydra import initialize_config_dir
-from omegaconf import OmegaConf
 
 from bayessim_exp import registry
 from bayessim_exp.pipeline import Pipeline
 
 ROOT = Path(__file__).resolve().parents[2]
-CONF, SWEEPS = ROOT / "conf", ROOT / "sweeps"
+CONF = ROOT / "conf"
 OPTIONS = [(g, p.stem) for g in registry.GROUPS for p in sorted((CONF / g).glob("*.yaml"))]
 
 
@@ -35,19 +33,6 @@ def test_every_option_builds(compose, tmp_path, real_file, group, name):
 @pytest.mark.parametrize("name", sorted(p.stem for p in (CONF / "experiment").glob("*.yaml")))
 def test_every_experiment_builds(compose, tmp_path, name):
     Pipeline(compose([f"experiment={name}"]), tmp_path)
-
-
-def _sweep_overrides(name: str) -> list[list[str]]:
-    params = OmegaConf.load(SWEEPS / f"{name}.yaml").hydra.sweeper.params
-    return [[f"{key}={value.strip()}"] for key, values in params.items() for value in str(values).split(",")]
-
-
-@pytest.mark.parametrize("name", sorted(p.stem for p in SWEEPS.glob("*.yaml")))
-def test_every_stored_sweep_builds(tmp_path, name):
-    for overrides in _sweep_overrides(name):
-        with initialize_config_dir(config_dir=str(SWEEPS), version_base="1.3"):
-            cfg = hydra_compose(config_name=name, overrides=overrides)
-        Pipeline(cfg, tmp_path / "_".join(overrides))
 
 
 @pytest.mark.parametrize("group, name", OPTIONS)

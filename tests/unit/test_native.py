@@ -5,7 +5,7 @@ import numpy as np
 import torch
 
 from bayessim_exp import registry
-from bayessim_exp.inference.bayessim.method import BayesSim
+from bayessim_exp.inference.bayessim.method import BayesSim, BayesSimConfig
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.tasks.base import Task, TaskConfig
 
@@ -43,7 +43,8 @@ def native(task, n):
 def spring_task():
     # explicit Euler on x'' = -k/m x is unstable once dt * sqrt(k/m) is large: k=1e6, m=0.01 blows up
     cfg = TaskConfig(parameters={"k": {"range": [1.0, 1.0e6], "operation": "set", "targets": ["jnt_stiffness[slide]"]}},
-                     real_params={"k": 10.0}, control_dt=0.02, episode_length=200)
+                     real_params={"k": 10.0}, control_dt=0.02, episode_length=200,
+                     mjx_tuning={})
     return Spring(cfg)
 
 
@@ -66,7 +67,9 @@ def test_summarize_drops_and_counts_diverged_simulations(tmp_path, monkeypatch):
     comp = type("C", (), {"summarizer": lambda self, t: t.states[:, -1], "device": torch.device("cpu")})()
     collected = {"theta": torch.tensor([[10.0], [1.0e6], [100.0], [1.0e6]]), "traj": traj.state_dict()}
     ctx = type("Ctx", (), {"output": lambda self, stage: collected})()
-    out = BayesSim(None, comp).summarize(ctx)
+    cfg = BayesSimConfig(proposal="prior", finetune=True, max_components=50, parameter_space="box",
+                         combination="product")
+    out = BayesSim(cfg, comp).summarize(ctx)
     assert out["diverged"] == 2
     assert out["theta"].squeeze(1).tolist() == [10.0, 100.0]
 
@@ -107,7 +110,7 @@ class Marker(Task):
 
 def test_first_observation_after_reset_reads_derived_fields():
     cfg = TaskConfig(parameters={"m": {"range": [0.5, 2.0], "targets": ["body_mass[bob]"]}}, real_params={"m": 1.0}, control_dt=0.05,
-                     episode_length=200)
+                     episode_length=200, mjx_tuning={})
     sim = native(Marker(cfg), 2)
     obs = sim.reset(np.ones((2, 1)), None, seed=0)
     np.testing.assert_allclose(obs[:, 0], 1.5)  # site_xpos computed at the reset state, not zeros

@@ -6,7 +6,7 @@ import math
 
 import torch
 
-from .base import ParameterDistribution
+from .base import ParameterDistribution, seeded_by
 from .box import inside, restrict_log_prob
 from .rejection import sample_by_rejection
 
@@ -40,6 +40,7 @@ class Restricted(ParameterDistribution):
     @torch.no_grad()
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         n = math.prod(shape)
-        draws = sample_by_rejection(lambda b: self.dist.sample((b,), generator=generator).double(),
-                                    lambda t: inside(t, self.low, self.high), n, self.mass_inside)
+        with seeded_by(generator):  # `dist` may be any distribution, one that takes no generator too
+            draws = sample_by_rejection(lambda b: self.dist.sample((b,)).double(),
+                                        lambda t: inside(t, self.low, self.high), n, self.mass_inside)
         return draws.reshape(*shape, self.dim)

@@ -1,4 +1,11 @@
-"""Pair plots of posterior samples: 1D marginals with the prior and true value, 2D with the true value."""
+"""Pair plots of posterior samples, zoomed to where the posterior is.
+
+A narrow posterior drawn on the prior's axes is one histogram bin and a dot, so every panel is
+zoomed to the posterior's range; a strip above each marginal shows that window inside the prior's
+range. Diagonal: the posterior's marginal density over the prior's. Below it: 2-D density contours
+of the 50 % and 90 % highest-density regions. The true value is a red line or cross, or an arrow at
+the edge when it lies outside the window.
+"""
 
 from __future__ import annotations
 
@@ -7,37 +14,154 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from scipy.ndimage import gaussian_filter  # noqa: E402
+
+MASS_LEVELS = (0.9, 0.5)  # highest-density regions drawn in the 2-D panels, widest first
+_WINDOW_QUANTILES = (0.005, 0.995)  # the window holds 99 % of the posterior's marginal, padded
+_PAD = 0.15
+_MIN_WIDTH = 1e-3  # of the prior's width: a posterior collapsed to a point still gets a readable window
+_GRID = 50  # cells per axis of the 2-D density
+_SMOOTHING = 1.5  # cells: Gaussian smoothing of the 2-D histogram before contouring
+
+
+def zoom_window(values: np.ndarray, low: float, high: float, true: float | None = None) -> tuple[float, float]:
+    """The x-range of one parameter's panels: the posterior's central 99 %, padded, inside [low, high];
+    widened to take in the true value when that is at most one window width away."""
+    values = values[np.isfinite(values)]
+    if len(values) == 0:
+        return float(low), float(high)
+    q_lo, q_hi = np.quantile(values, _WINDOW_QUANTILES)
+    lo, hi = q_lo - _PAD * (q_hi - q_lo), q_hi + _PAD * (q_hi - q_lo)
+    if true is not None and np.isfinite(true) and lo - (hi - lo) <= true <= hi + (hi - lo):
+        margin = _PAD * (hi - lo)
+        lo, hi = min(lo, true - margin), max(hi, true + margin)
+    min_width = _MIN_WIDTH * (high - low)
+    if hi - lo < min_width:
+        centre = 0.5 * (lo + hi)
+        lo, hi = centre - 0.5 * min_width, centre + 0.5 * min_width
+    return float(max(lo, low)), float(min(hi, high))
+
+
+def hpd_thresholds(density: np.ndarray, masses=MASS_LEVELS) -> list[float]:
+    """Density values whose super-level sets hold `masses` of the total (cells sorted high to low)."""
+    flat = np.sort(density.ravel())[::-1]
+    cumulative = np.cumsum(flat) / flat.sum()
+    return [float(flat[min(np.searchsorted(cumulative, m), len(flat) - 1)]) for m in masses]
+
+
+def _marginal(ax, i, samples, prior_samples, window, true):
+    bins = np.linspace(*window, 41)
+    width = bins[1] - bins[0]
+    if prior_samples is not None:
+        counts, _ = np.histogram(prior_samples[:, i], bins)
+        ax.stairs(counts / (len(prior_samples) * width), bins, fill=True, color="0.85", label="prior")
+    counts, _ = np.histogram(samples[:, i], bins)
+    ax.stairs(counts / (len(samples) * width), bins, color="C0", lw=1.5, label="posterior")
+    _mark_true_1d(ax, true, window)
+    ax.set_xlim(*window)
+    ax.set_yticks([])
+
+
+def _mark_true_1d(ax, true, window):
+    if true is None:
+        return
+    if window[0] <= true <= window[1]:
+        ax.axvline(true, color="red", lw=1.2, label="true")
+    else:
+        right = true > window[1]
+        ax.annotate(f"true {true:.3g} " + ("\u2192" if right else "\u2190"), xy=(0.98 if right else 0.02, 0.9),
+                    xycoords="axes fraction", ha="right" if right else "left", color="red", fontsize=7)
+
+
+def _prior_strip(ax, low, high, window, true):
+    """A thin bar above a marginal: the prior's range, the zoomed window on it, the true value."""
+    strip = ax.inset_axes([0.0, 1.04, 1.0, 0.1])
+    strip.plot([low, high], [0, 0], color="0.6", lw=3, solid_capstyle="butt")
+    strip.plot(window, [0, 0], color="C0", lw=6, solid_capstyle="butt")
+    if true is not None:
+        strip.plot([true], [0], marker="|", color="red", ms=9, mew=2)
+    strip.set_xlim(low - 0.02 * (high - low), high + 0.02 * (high - low))
+    strip.set_ylim(-1, 1)
+    strip.axis("off")
+    strip.text(0.0, 1.2, f"{low:.3g}", transform=strip.transAxes, fontsize=6, ha="left", va="bottom", color="0.4")
+    strip.text(1.0, 1.2, f"{high:.3g}", transform=strip.transAxes, fontsize=6, ha="right", va="bottom", color="0.4")
+
+
+def _joint(ax, x, y, window_x, window_y, true_xy):
+    counts, xe, ye = np.histogram2d(x, y, bins=_GRID, range=[window_x, window_y])
+    density = gaussian_filter(counts, _SMOOTHING)
+    levels = sorted(set(hpd_thresholds(density)) | {float(density.max())}) if density.sum() > 0 else []
+    if len(levels) >= 2 and levels[0] > 0:
+        centres_x, centres_y = 0.5 * (xe[1:] + xe[:-1]), 0.5 * (ye[1:] + ye[:-1])
+        ax.contourf(centres_x, centres_y, density.T, levels=levels, colors=["#9ecae1", "#3182bd"][-len(levels) + 1:])
+        ax.contour(centres_x, centres_y, density.T, levels=levels[:-1], colors="#08519c", linewidths=0.8)
+    else:  # too few distinct cells for contours (a point mass): show the draws themselves
+        ax.plot(x[:500], y[:500], ".", color="C0", ms=2)
+    if true_xy is not None and window_x[0] <= true_xy[0] <= window_x[1] and window_y[0] <= true_xy[1] <= window_y[1]:
+        ax.plot(*true_xy, marker="x", color="red", ms=8, mew=2)
+    ax.set_xlim(*window_x)
+    ax.set_ylim(*window_y)
 
 
 def pair_plot(samples: np.ndarray, names: list[str], low: np.ndarray, high: np.ndarray,
               true: np.ndarray | None, title: str, prior_samples: np.ndarray | None = None) -> plt.Figure:
     """samples [n, d] of the posterior; prior_samples [m, d] drawn from the prior for its marginals."""
+    samples = samples[np.isfinite(samples).all(1)]
     d = len(names)
-    fig, axes = plt.subplots(d, d, figsize=(2.4 * d + 1, 2.4 * d + 1), squeeze=False)
+    windows = [zoom_window(samples[:, i], low[i], high[i], None if true is None else true[i]) for i in range(d)]
+    size = max(2.6 * d + 1.2, 5.0)
+    fig, axes = plt.subplots(d, d, figsize=(size, size), squeeze=False)
     for i in range(d):
+        t_i = None if true is None else float(true[i])
         for j in range(d):
             ax = axes[i, j]
             if j > i:
                 ax.axis("off")
-                continue
-            if i == j:
-                bins = np.linspace(low[i], high[i], 41)
-                if prior_samples is not None:
-                    ax.hist(prior_samples[:, i], bins=bins, density=True, color="0.75", label="prior")
-                ax.hist(samples[:, i], bins=bins, density=True, histtype="step", color="C0", lw=1.5, label="posterior")
-                if true is not None:
-                    ax.axvline(true[i], color="red", lw=1, label="true")
-                ax.set_xlim(low[i], high[i])
-                ax.set_yticks([])
+            elif i == j:
+                _marginal(ax, i, samples, prior_samples, windows[i], t_i)
+                _prior_strip(ax, float(low[i]), float(high[i]), windows[i], t_i)
             else:
-                ax.hist2d(samples[:, j], samples[:, i], bins=40, range=[[low[j], high[j]], [low[i], high[i]]], cmap="Blues")
-                if true is not None:
-                    ax.plot(true[j], true[i], marker="x", color="red", ms=8, mew=2)
+                _joint(ax, samples[:, j], samples[:, i], windows[j], windows[i],
+                       None if true is None else (float(true[j]), float(true[i])))
             if i == d - 1:
                 ax.set_xlabel(names[j])
             if j == 0 and i > 0:
                 ax.set_ylabel(names[i])
-    axes[0, 0].legend(fontsize=7, loc="upper right")
-    fig.suptitle(title)
+            ax.tick_params(labelsize=7)
+    if d == 1:
+        axes[0, 0].legend(fontsize=7, loc="upper left", frameon=False)
+    else:  # in the empty upper triangle
+        from matplotlib.patches import Patch
+
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        handles += [Patch(color="#3182bd"), Patch(color="#9ecae1")]
+        labels += ["50 % region", "90 % region"]
+        fig.legend(handles, labels, loc="upper right", bbox_to_anchor=(0.99, 0.93), fontsize=8, frameon=False)
+    fig.suptitle(f"{title}\nzoomed to the posterior; bars: the window in the prior's range",
+                 fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    return fig
+
+
+def replay_plot(real: np.ndarray, posterior: np.ndarray, prior: np.ndarray, obs_names: list[str], dt: float,
+                p_values: list[float], title: str, max_lines: int = 20) -> plt.Figure:
+    """Real trajectories [n, T+1, S] (black) over replays at posterior [n, m, T+1, S] (blue) and prior (grey)
+    draws from the same initial states under the same actions; one row per trajectory, one column per feature."""
+    n, s = real.shape[0], real.shape[-1]
+    fig, axes = plt.subplots(n, s, figsize=(3 * s + 1, 2.2 * n + 1), squeeze=False)
+    t = dt * np.arange(real.shape[1])
+    for i in range(n):
+        for j in range(s):
+            ax = axes[i, j]
+            ax.plot(t, prior[i, :max_lines, :, j].T, color="0.75", lw=0.6)
+            ax.plot(t, posterior[i, :max_lines, :, j].T, color="C0", lw=0.6, alpha=0.7)
+            ax.plot(t, real[i, :, j], color="black", lw=1.5)
+            if i == 0:
+                ax.set_title(obs_names[j], fontsize=9)
+            if j == 0:
+                ax.set_ylabel(f"real {i}\np = {p_values[i]:.3g}", fontsize=8)
+            if i == n - 1:
+                ax.set_xlabel("time [s]")
+    fig.suptitle(f"{title}: real (black), posterior replays (blue), prior replays (grey)")
     fig.tight_layout()
     return fig

@@ -53,5 +53,16 @@ class TensorBoardLogger:
         self.writer._get_file_writer().add_summary(Summary(value=[Summary.Value(tag=tag, image=image)]), step)
         self.writer.flush()
 
+    def replays(self, round_index: int, check, obs_names: list[str], max_trajectories: int = 3) -> None:
+        """The replayed predictive check (diagnostics/replayed_check.py) as a picture."""
+        from .plots import replay_plot
+
+        k = min(max_trajectories, check.real.num)
+        fig = replay_plot(check.real.states[:k].numpy(), check.posterior_states[:k].numpy(),
+                          check.prior_states[:k].numpy(), obs_names, check.real.dt, check.p_value[:k],
+                          f"replayed predictive check, round {round_index}")
+        self.writer.add_figure("predictive/replay", fig, round_index)
+        self.writer.flush()
+
     def close(self) -> None:
         self.writer.close()

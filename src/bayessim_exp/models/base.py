@@ -34,6 +34,7 @@ class TrainConfig:
     patience: int  # epochs without validation improvement before stopping
     val_fraction: float
     weight_decay: float
+    project_inputs: bool  # replace the summaries by ridge predictions of the parameters (models/projection.py)
 
     def validate(self) -> None:
         if self.lr <= 0 or self.batch_size < 1 or self.max_epochs < 1 or self.patience < 1:
@@ -64,7 +65,8 @@ class StandardizedDensityModel:
     """Fitting and state shared by models with standardised inputs and targets.
 
     Subclasses build `self.net` (a module holding every trainable part and the standardisers
-    `self.x_norm`, `self.theta_norm`) and define `_nll(theta_std, x_std)` and `conditional`.
+    `self.x_norm`, `self.theta_norm`, and `self.projection` when cfg.project_inputs) and define
+    `_nll(theta_std, inputs)` and `conditional`, which reads its inputs through `self._inputs(x)`.
     """
 
     cfg: TrainConfig
@@ -72,19 +74,37 @@ class StandardizedDensityModel:
     x_norm: Standardizer
     theta_norm: Standardizer
     fitted: bool = False
+    projection = None
+
+    def _inputs(self, x: torch.Tensor) -> torch.Tensor:
+        """What the network sees: standardised summaries, or their ridge predictions of the parameters."""
+        z = self.x_norm(x)
+        return z if self.projection is None else self.projection(z)
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
-        theta, x = theta.float(), x.float()
-        if not self.fitted:  # fine-tuning keeps the first standardisation, so weights stay meaningful
+        """Trains where `x` lives (a GPU when the pipeline runs with device=cuda); the fitted network
+        goes back to the CPU, where its state is saved and the posteriors are built."""
+        theta, x = theta.float().to(x.device), x.float()
+        self.net.to(x.device)
+        inputs = None
+        if not self.fitted:  # fine-tuning keeps the first standardisation and projection, so weights stay meaningful
             torch.manual_seed(seed)
             self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
             self.x_norm.fit(x)
             self.theta_norm.fit(theta)
-        history = train_density(self.net, self._nll, self.theta_norm(theta), self.x_norm(x), self.cfg,
-                                seed=seed, label=label, on_epoch=on_epoch)
+            if self.projection is not None:
+                inputs = self.projection.fit(self.x_norm(x), self.theta_norm(theta), seed)
+        try:
+            if inputs is None:
+                with torch.no_grad():
+                    inputs = self._inputs(x)
+            history = train_density(self.net, self._nll, self.theta_norm(theta), inputs, self.cfg,
+                                    seed=seed, label=label, on_epoch=on_epoch)
+        finally:
+            self.net.to("cpu")
         self.fitted = True
         return history
 
@@ -120,29 +140,42 @@ def train_density(
     if n - n_val < 2:
         raise TrainingError(f"{label}: {n} simulations are too few to train on")
     perm = torch.randperm(n, generator=g)
-    val_idx, train_idx = perm[:n_val], perm[n_val:]
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    val_idx, train_idx = perm[:n_val].to(theta.device), perm[n_val:]
+    params = [p for p in net.parameters() if p.requires_grad]
+    opt = torch.optim.Adam(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
     best, best_state, since_best = math.inf, None, 0
     history: dict[str, list[float]] = {"train": [], "val": []}
     step = 0
     bar = tqdm(range(cfg.max_epochs), desc=f"fit {label}".strip(), leave=False, delay=2, disable=None)
     for epoch in bar:
         net.train()
-        order = train_idx[torch.randperm(len(train_idx), generator=g)]
-        total, count = 0.0, 0
+        order = train_idx[torch.randperm(len(train_idx), generator=g)].to(theta.device)
+        # the first step with a non-finite loss or gradient, tracked on the device and read once per
+        # epoch: a read per step would stall a GPU at every batch
+        bad_loss_step = bad_grad_step = torch.tensor(-1, device=theta.device)
+        bad_loss = torch.tensor(0.0, device=theta.device)
+        total = torch.tensor(0.0, device=theta.device)
+        count = 0
         for start in range(0, len(order), cfg.batch_size):
             b = order[start : start + cfg.batch_size]
             loss = nll(theta[b], x[b]).mean()
             step += 1
-            if not torch.isfinite(loss):
-                raise TrainingError(f"{label}: loss became {loss.item()} at epoch {epoch}, step {step}")
             opt.zero_grad(set_to_none=True)
             loss.backward()
-            if not all(torch.isfinite(p.grad).all() for p in net.parameters() if p.grad is not None):
-                raise TrainingError(f"{label}: non-finite gradient at epoch {epoch}, step {step}")
+            first = (bad_loss_step < 0) & ~torch.isfinite(loss)
+            bad_loss_step = torch.where(first, step, bad_loss_step)
+            bad_loss = torch.where(first, loss.detach(), bad_loss)
+            grads = [p.grad for p in params if p.grad is not None]
+            grad_ok = torch.isfinite(torch.nn.utils.get_total_norm(grads)) | ~torch.isfinite(loss)
+            bad_grad_step = torch.where((bad_grad_step < 0) & ~grad_ok, step, bad_grad_step)
             opt.step()
-            total += loss.item() * len(b)
+            total += loss.detach() * len(b)
             count += len(b)
+        if bad_loss_step >= 0:
+            raise TrainingError(f"{label}: loss became {bad_loss.item()} at epoch {epoch}, step {int(bad_loss_step)}")
+        if bad_grad_step >= 0:
+            raise TrainingError(f"{label}: non-finite gradient at epoch {epoch}, step {int(bad_grad_step)}")
+        total = total.item()
         net.eval()
         with torch.no_grad():
             val = nll(theta[val_idx], x[val_idx]).mean().item()

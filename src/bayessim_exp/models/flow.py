@@ -21,6 +21,7 @@ from ..distributions.base import ParameterDistribution, seeded_by
 from ..errors import ConfigError
 from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
+from .mdnn import input_projection
 
 
 @dataclasses.dataclass
@@ -75,13 +76,15 @@ class Flow(StandardizedDensityModel):
     def __init__(self, cfg: FlowConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
         self.embedding = embedding if embedding is not None else nn.Identity()
+        self.projection = input_projection(cfg, theta_dim, x_dim, embedding)
         with torch.no_grad():
-            context = self.embedding(torch.zeros(2, x_dim)).shape[-1]
+            context = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
         self.flow = zuko.flows.NSF(theta_dim, context, bins=cfg.bins, transforms=cfg.transforms,
                                    hidden_features=list(cfg.hidden))
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
         self.net = nn.ModuleDict({"embedding": self.embedding, "flow": self.flow,
-                                  "x_norm": self.x_norm, "theta_norm": self.theta_norm})
+                                  "x_norm": self.x_norm, "theta_norm": self.theta_norm,
+                                  **({} if self.projection is None else {"projection": self.projection})})
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         return -self.flow(self.embedding(x_std)).log_prob(theta_std)
@@ -90,7 +93,7 @@ class Flow(StandardizedDensityModel):
     def conditional(self, x_obs: torch.Tensor) -> FlowConditional:
         """q(theta | x_obs) for one summary x_obs [F], with sample and log_prob in parameter units."""
         self.net.eval()
-        dist = self.flow(self.embedding(self.x_norm(x_obs.float().reshape(1, -1)))[0])
+        dist = self.flow(self.embedding(self._inputs(x_obs.float().reshape(1, -1)))[0])
         return FlowConditional(dist, self.theta_norm.shift, self.theta_norm.scale)
 
 

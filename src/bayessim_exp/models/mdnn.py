@@ -17,6 +17,7 @@ from ..distributions.mixture import GaussianMixture
 from ..errors import ConfigError
 from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
+from .projection import RidgeProjection
 
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 
@@ -38,6 +39,15 @@ class MdnnConfig(TrainConfig):
             raise ConfigError(f"activation {self.activation!r} not allowed; allowed: {', '.join(ACTIVATIONS)}")
         if self.covariance not in ("full", "diagonal"):
             raise ConfigError(f"covariance {self.covariance!r} not allowed; allowed: full, diagonal")
+
+
+def input_projection(cfg: TrainConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None) -> RidgeProjection | None:
+    if not cfg.project_inputs:
+        return None
+    if embedding is not None:
+        raise ConfigError("project_inputs replaces the summaries by linear predictions; it cannot follow a learned "
+                          "embedding (summarizer=learned): set model.project_inputs=false")
+    return RidgeProjection(x_dim, theta_dim)
 
 
 class MixtureHead(nn.Module):
@@ -77,8 +87,9 @@ class MDNN(StandardizedDensityModel):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
         act = ACTIVATIONS[cfg.activation]
         self.embedding = embedding if embedding is not None else nn.Identity()
+        self.projection = input_projection(cfg, theta_dim, x_dim, embedding)
         with torch.no_grad():
-            width = self.embedding(torch.zeros(2, x_dim)).shape[-1]
+            width = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
         layers = []
         for h in cfg.hidden:
             layers += [nn.Linear(width, h), act()]
@@ -86,7 +97,8 @@ class MDNN(StandardizedDensityModel):
         self.body = nn.Sequential(self.embedding, *layers)
         self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
-        self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm})
+        self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm,
+                                  **({} if self.projection is None else {"projection": self.projection})})
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         return mixture_nll(*self.head(self.body(x_std)), theta_std)
@@ -95,7 +107,7 @@ class MDNN(StandardizedDensityModel):
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
         """q(theta | x_obs) in parameter units, for one summary x_obs [F]."""
         self.net.eval()
-        logits, means, U = self.head(self.body(self.x_norm(x_obs.float().reshape(1, -1))))
+        logits, means, U = self.head(self.body(self._inputs(x_obs.float().reshape(1, -1))))
         eye = torch.eye(self.theta_dim, dtype=torch.float64)
         U_inv = torch.linalg.solve_triangular(U[0].double(), eye.expand_as(U[0]), upper=True)
         covs = U_inv @ U_inv.transpose(-1, -2)

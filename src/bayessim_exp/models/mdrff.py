@@ -22,7 +22,7 @@ from torch import nn
 from ..errors import ConfigError
 from ..registry import register
 from .base import Standardizer, TrainConfig
-from .mdnn import ACTIVATIONS, MDNN, MixtureHead
+from .mdnn import ACTIVATIONS, MDNN, MixtureHead, input_projection
 
 # kernel name -> degrees of freedom of the Student-t spectral density (None: Gaussian, the RBF)
 KERNELS = {"rbf": None, "matern12": 1.0, "matern32": 3.0, "matern52": 5.0}
@@ -88,8 +88,9 @@ class MDRFF(MDNN):
     def __init__(self, cfg: MdrffConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
         self.embedding = embedding if embedding is not None else nn.Identity()
+        self.projection = input_projection(cfg, theta_dim, x_dim, embedding)
         with torch.no_grad():
-            self.feature_in_dim = self.embedding(torch.zeros(2, x_dim)).shape[-1]
+            self.feature_in_dim = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
         self.rff = RandomFourierFeatures(self.feature_in_dim, cfg.features)
         layers, width = [self.embedding, self.rff], cfg.features
         for h in cfg.hidden:
@@ -98,7 +99,8 @@ class MDRFF(MDNN):
         self.body = nn.Sequential(*layers)
         self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
-        self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm})
+        self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm,
+                                  **({} if self.projection is None else {"projection": self.projection})})
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
         if not self.fitted:  # frequencies are drawn once, with the first fit's seed, and then kept

@@ -19,6 +19,10 @@ from ..errors import ConfigError
 from ..sim.params import ParamConfig, ParamSpec
 
 ASSETS = Path(__file__).parent / "assets"
+# what mjx_tuning may change: solver iterations and line-search iterations (MjOption), the Euler
+# damping flag, MJX's contact caps (custom numerics it reads: contacts per geom pair, geom pairs per
+# collision function), and the smallest geom condim (MJX has no frictionless contacts with elliptic cones)
+MJX_TUNING = ("iterations", "ls_iterations", "eulerdamp", "max_contact_points", "max_geom_pairs", "min_condim")
 
 
 @dataclasses.dataclass
@@ -29,6 +33,8 @@ class TaskConfig:
     real_params: dict[str, float]
     control_dt: float
     episode_length: int
+    # sim=mjx only (docs/tasks.md): solver settings and contact caps that make the model fast on MJX
+    mjx_tuning: dict[str, Any]
 
     def validate(self) -> None:
         if not self.parameters:
@@ -44,6 +50,9 @@ class TaskConfig:
             low, high = self.parameters[name].range
             if not low <= value <= high:
                 raise ConfigError(f"real_params.{name}={value} lies outside its range [{low}, {high}]")
+        unknown = set(self.mjx_tuning) - set(MJX_TUNING)
+        if unknown:
+            raise ConfigError(f"mjx_tuning: unknown keys {sorted(unknown)}; allowed: {', '.join(MJX_TUNING)}")
         if self.control_dt <= 0 or self.episode_length < 1:
             raise ConfigError("control_dt must be > 0 and episode_length >= 1")
 
@@ -74,6 +83,25 @@ class Task:
     def model(self) -> mujoco.MjModel:
         return mujoco.MjModel.from_xml_path(str(ASSETS / self.xml))
 
+    @functools.cached_property
+    def mjx_model(self) -> mujoco.MjModel:
+        """The model sim=mjx simulates: `model` with the task's `mjx_tuning` applied."""
+        tuning = self.cfg.mjx_tuning
+        if not tuning:
+            return self.model
+        spec = mujoco.MjSpec.from_file(str(ASSETS / self.xml))
+        for key in ("iterations", "ls_iterations"):
+            if key in tuning:
+                setattr(spec.option, key, int(tuning[key]))
+        if "eulerdamp" in tuning and not tuning["eulerdamp"]:
+            spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+        for geom in spec.geoms if "min_condim" in tuning else ():
+            geom.condim = max(geom.condim, int(tuning["min_condim"]))
+        for key in ("max_contact_points", "max_geom_pairs"):
+            if key in tuning:
+                spec.add_numeric(name=key, data=[float(tuning[key])])
+        return spec.compile()
+
     @property
     def obs_dim(self) -> int:
         return len(self.obs_names)
@@ -96,6 +124,12 @@ class Task:
 
         Fields left out keep the model's defaults (qpos0, zero velocities)."""
         return {"qpos": np.repeat(self.model.qpos0[None], n, 0), "qvel": np.zeros((n, self.model.nv))}
+
+    def state_from_observation(self, obs: np.ndarray) -> dict[str, np.ndarray] | None:
+        """The MjData state fields [n, ...] whose observation is obs [n, S], where the observation
+        determines the state (SimOpt and the replayed predictive check restart simulations from real
+        initial states); None otherwise."""
+        return None
 
     def observe(self, d: Any, xp: Any = np) -> Any:
         raise NotImplementedError

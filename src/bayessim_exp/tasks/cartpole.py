@@ -33,6 +33,9 @@ class Cartpole(Task):
         p, v = self.cfg.reset_pos, self.cfg.reset_vel
         return {"qpos": rng.uniform(-p, p, size=(n, 2)), "qvel": rng.uniform(-v, v, size=(n, 2))}
 
+    def state_from_observation(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        return {"qpos": obs[:, [0, 2]].copy(), "qvel": obs[:, [1, 3]].copy()}
+
     def observe(self, d: Any, xp: Any = np) -> Any:
         return xp.stack([d.qpos[:, 0], d.qvel[:, 0], d.qpos[:, 1], d.qvel[:, 1]], axis=-1)
 

@@ -26,6 +26,9 @@ class Pendulum(Task):
         v = self.cfg.max_speed_reset
         return {"qpos": rng.uniform(-np.pi, np.pi, size=(n, 1)), "qvel": rng.uniform(-v, v, size=(n, 1))}
 
+    def state_from_observation(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        return {"qpos": np.arctan2(obs[:, 1:2], obs[:, 0:1]), "qvel": obs[:, 2:3].copy()}
+
     def observe(self, d: Any, xp: Any = np) -> Any:
         theta, omega = d.qpos[:, 0], d.qvel[:, 0]
         return xp.stack([xp.cos(theta), xp.sin(theta), omega], axis=-1)

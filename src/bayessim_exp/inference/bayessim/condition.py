@@ -4,22 +4,46 @@ For i.i.d. real summaries x_1..x_n and a model trained on simulations from `prop
 p(theta | x_1..x_n) is proportional to p(theta) * prod_i q(theta | x_i) / proposal(theta)
 (SNPE-A; the product of per-trajectory posteriors over p^(n-1) when the proposal is the prior).
 correction.py computes it, in closed form where it exists; docs/statistics.md explains.
+A model fitted in probit space (distributions/probit.py) is conditioned there, under the standard
+normal prior, and the result is mapped back to the box.
 """
 
 from __future__ import annotations
 
 import torch
 
+from ...distributions.base import ParameterDistribution
+from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
+from ...distributions.truncated_prior import TruncatedPrior
 from ...models.base import PosteriorModel
-from .correction import posterior
+from .combination import Dispersion, combine
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
-              seed: int = 0):
-    """The posterior given x_obs [n, F] (or one summary [F]), as a distribution with sample and log_prob.
+              seed: int = 0, probit: ProbitTransform | None = None,
+              combination: str = "dispersion") -> tuple[ParameterDistribution, Dispersion | None]:
+    """The posterior given x_obs [n, F] (or one summary [F]), and the dispersion of the per-trajectory
+    posteriors (None for one summary); `combination` says how several summaries are combined
+    (combination.py).
 
     prior None means an improper flat prior (no truncation); proposal None means simulations from the prior.
+    probit: the transform the model's parameters were fitted in, or None for parameter units.
     """
     x_obs = x_obs.reshape(-1, x_obs.shape[-1])
     conditionals = [model.conditional(x) for x in x_obs]
-    return posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)
+    if probit is None:
+        return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed)
+    post, spread = combine(combination, conditionals, standard_normal_prior(probit.dim),
+                           _probit_proposal(proposal, prior), max_components=max_components, seed=seed)
+    return ProbitPosterior(post, probit), spread
+
+
+def _probit_proposal(proposal, prior):
+    """The proposal's density over u: none to correct for the prior or a truncation of it (constant
+    ratio); a previous probit-space posterior's inner distribution."""
+    if proposal is None or proposal is prior or (isinstance(proposal, TruncatedPrior) and proposal.prior is prior):
+        return None
+    if isinstance(proposal, ProbitPosterior):
+        return proposal.inner
+    raise ValueError(f"a probit-space model cannot correct for a {type(proposal).__name__} proposal in parameter units; "
+                     "use proposal=truncated, prior or posterior")

@@ -111,7 +111,17 @@ def _product(mixtures: Sequence[GaussianMixture], max_components: int) -> Gaussi
     return out
 
 
-def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = 50, seed: int = 0):
+def _temper(mix: GaussianMixture, tau: float) -> GaussianMixture:
+    """mix^tau renormalised, component by component: N(m, S)^tau is proportional to N(m, S / tau) with
+    integral proportional to |S|^((1 - tau) / 2). Exact for one component or well-separated ones."""
+    if tau == 1.0:
+        return mix
+    logdet = 2 * torch.log(torch.diagonal(mix.scale_tril, dim1=-2, dim2=-1)).sum(-1)
+    return GaussianMixture(tau * mix.log_weights + 0.5 * (1 - tau) * logdet, mix.means, mix.covs / tau)
+
+
+def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = 50, seed: int = 0,
+              temperature: float = 1.0):
     """p(theta | x_1..n) from q(theta | x_i) for each real summary (see the module docstring).
 
     conditionals: one q(theta | x_i) per real summary, GaussianMixtures (closed form) or any
@@ -120,6 +130,8 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
         an improper flat prior.
     proposal: p~, the distribution the training simulations were drawn from; None, the prior itself
         or a TruncatedPrior of it mean no correction; a list gives one proposal per conditional.
+    temperature: tau in (0, 1], the power of the likelihood ratios prod_i q_i / p~_i (1: the plain
+        product; combination.py chooses it when trajectories disagree).
     Returns a distribution with sample(shape) and log_prob(theta).
     """
     n = len(conditionals)
@@ -131,13 +143,16 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     corrected = [p for p in proposals if not _needs_no_correction(p, prior)]
     for p in corrected:
         _check_covers(prior, p)
-    prior_power = 1 - (n - len(corrected))  # p * prod over uncorrected factors of 1/p
+    if not 0.0 < temperature <= 1.0:
+        raise ValueError(f"temperature must be in (0, 1], got {temperature}")
+    tau = float(temperature)
+    prior_power = 1 - tau * (n - len(corrected))  # p * prod over uncorrected factors of (1/p)^tau
     box = _box(prior)
 
     reason = _closed_form_obstacle(conditionals, prior, prior_power, corrected)
     if reason is None:
-        mix = _product(conditionals, max_components)
-        lam, eta = _ratio_natural(prior, prior_power, corrected, mix.dim)
+        mix = _temper(_product(conditionals, max_components), tau)
+        lam, eta = _ratio_natural(prior, prior_power, corrected, mix.dim, tau)
         result = mix if lam is None else _apply_gaussian_ratio(mix, lam, eta)
         if result is not None:
             return result if box is None else TruncatedMixture(result, *box, seed=seed)
@@ -145,10 +160,10 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     elif n == 1 and prior_power == 0 and not corrected:
         q = conditionals[0]  # a flow trained on prior draws: its density is the posterior up to the support
         return q if box is None else Restricted(q, *box, seed=seed)
-    base_mix = _product([_moment_gaussian(q) for q in conditionals], max_components)
+    base_mix = _temper(_product([_moment_gaussian(q) for q in conditionals], max_components), tau)
     inflated = GaussianMixture(base_mix.log_weights, base_mix.means, _INFLATE * base_mix.covs)
     parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
-    log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected)
+    log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected, tau)
     result = ImportancePosterior(log_target, DefensiveMixture(parts), num=_IS_DRAWS, seed=seed)
     log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample size %.0f",
                 reason, _IS_DRAWS, result.ess)
@@ -156,24 +171,25 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
 
 
 class CorrectedProduct:
-    """log p(theta)^prior_power + sum_i log q_i(theta | x_i) - sum_j log p~_j(theta), up to a constant;
-    -inf outside the prior's support. A class, not a closure, so posteriors built on it can be saved."""
+    """log p(theta)^prior_power + tau * (sum_i log q_i(theta | x_i) - sum_j log p~_j(theta)), up to a
+    constant; -inf outside the prior's support. A class, not a closure, so posteriors built on it can be saved."""
 
-    def __init__(self, conditionals: list, prior, prior_power: int, corrected: list):
-        self.conditionals, self.prior, self.prior_power, self.corrected = conditionals, prior, prior_power, corrected
+    def __init__(self, conditionals: list, prior, prior_power: float, corrected: list, tau: float):
+        self.conditionals, self.prior, self.prior_power = conditionals, prior, prior_power
+        self.corrected, self.tau = corrected, tau
 
     def __call__(self, theta: torch.Tensor) -> torch.Tensor:
         theta = theta.double()
         lp = torch.zeros(theta.shape[:-1], dtype=torch.float64) if self.prior is None else self.prior.log_prob(theta).double()
-        out = sum(q.log_prob(theta).double() for q in self.conditionals)
+        out = self.tau * sum(q.log_prob(theta).double() for q in self.conditionals)
         if self.prior_power:
             out = out + self.prior_power * lp
         for p in self.corrected:
-            out = out - p.log_prob(theta).double()
+            out = out - self.tau * p.log_prob(theta).double()
         return torch.where(torch.isfinite(lp), out, torch.tensor(-torch.inf, dtype=out.dtype))
 
 
-def _closed_form_obstacle(conditionals, prior, prior_power: int, corrected: list) -> str | None:
+def _closed_form_obstacle(conditionals, prior, prior_power: float, corrected: list) -> str | None:
     if not all(isinstance(q, GaussianMixture) for q in conditionals):
         return "the conditional density is not a Gaussian mixture"
     if prior_power != 0 and _gaussian_factor(prior) == "other":
@@ -184,12 +200,12 @@ def _closed_form_obstacle(conditionals, prior, prior_power: int, corrected: list
     return None
 
 
-def _ratio_natural(prior, prior_power: int, corrected: list, dim: int):
-    """Natural parameters (lam, eta) of p^prior_power / prod p~_i, or (None, None) if constant."""
+def _ratio_natural(prior, prior_power: float, corrected: list, dim: int, tau: float = 1.0):
+    """Natural parameters (lam, eta) of p^prior_power / prod p~_i^tau, or (None, None) if constant."""
     lam = torch.zeros(dim, dim, dtype=torch.float64)
     eta = torch.zeros(dim, dtype=torch.float64)
     constant = True
-    factors = [(prior_power, _gaussian_factor(prior))] + [(-1, _gaussian_factor(p)) for p in corrected]
+    factors = [(prior_power, _gaussian_factor(prior))] + [(-tau, _gaussian_factor(p)) for p in corrected]
     for power, factor in factors:
         if power != 0 and factor is not None:
             prec, shift = _natural(*factor)

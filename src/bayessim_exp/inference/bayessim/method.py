@@ -13,15 +13,21 @@ import logging
 
 import torch
 
-from ...diagnostics.coverage import expected_coverage
+from ...diagnostics.coverage import expected_coverage, held_out_gain
+from ...diagnostics.guard import check_posterior
+from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
+from ...diagnostics.replay import replay
+from ...diagnostics.replayed_check import replayed_check
 from ...distributions.base import ParameterDistribution
+from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
 from ...errors import ConfigError, PosteriorError
 from ...registry import register
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, real_trajectories
+from .combination import COMBINATIONS
 from .condition import condition
 from .proposals import moment_matched
 
@@ -42,10 +48,16 @@ class BayesSimConfig:
     proposal: str  # prior | posterior | gaussian | truncated
     finetune: bool  # continue training the previous round's model (false: re-initialise)
     max_components: int  # mixture components kept when combining several real trajectories
+    parameter_space: str  # box | probit: what the model is fitted in (distributions/probit.py)
+    combination: str  # several real trajectories: dispersion | product (combination.py)
 
     def validate(self) -> None:
+        if self.parameter_space not in ("box", "probit"):
+            raise ConfigError(f"parameter_space={self.parameter_space!r} not allowed; allowed: box, probit")
         if self.proposal not in PROPOSALS:
             raise ConfigError(f"proposal={self.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
+        if self.combination not in COMBINATIONS:
+            raise ConfigError(f"combination={self.combination!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
 
@@ -54,6 +66,10 @@ class BayesSim(InferenceMethod):
     def __init__(self, cfg: BayesSimConfig, comp):
         self.cfg, self.comp = cfg, comp
         self._proposals: dict[int, ParameterDistribution | None] = {}
+        try:
+            self.probit = ProbitTransform(comp.prior) if cfg.parameter_space == "probit" else None
+        except ValueError as exc:
+            raise ConfigError(f"method.parameter_space=probit: {exc}") from None
 
     def stages(self) -> list[Stage]:
         return [
@@ -61,6 +77,7 @@ class BayesSim(InferenceMethod):
             Stage("summarize", self.summarize, inputs=("collect",)),
             Stage("fit", self.fit, inputs=("summarize",)),
             Stage("condition", self.condition, inputs=("real", "fit")),
+            Stage("model_check", self.model_check, inputs=("real", "summarize", "condition")),
         ]
 
     # proposals -----------------------------------------------------------------------
@@ -83,6 +100,8 @@ class BayesSim(InferenceMethod):
                 except ValueError as exc:
                     log.warning("round %d: %s; simulating from the prior instead", r, exc)
                     self._proposals[r] = None
+            elif self.cfg.proposal == "gaussian" and self.probit is not None:
+                self._proposals[r] = ProbitPosterior(moment_matched(previous.inner, seed=seed), self.probit)
             elif self.cfg.proposal == "gaussian":
                 self._proposals[r] = moment_matched(previous, self.comp.prior.low, self.comp.prior.high, seed=seed)
             else:
@@ -93,7 +112,7 @@ class BayesSim(InferenceMethod):
     def collect(self, ctx: RoundContext) -> dict:
         rc = self.comp.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
-        traj = self.comp.sims.rollout(theta, self.comp.policy(ctx), rc.collect.horizon, ctx.seed,
+        traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), rc.collect.horizon, ctx.seed,
                                       rc.logging.progress)
         return {"theta": theta.float(), "traj": traj.state_dict()}
 
@@ -110,17 +129,31 @@ class BayesSim(InferenceMethod):
         r = ctx.round
         first = r if self.cfg.proposal in _SINGLE_ROUND_PROPOSALS else 1
         data = [self._split(ctx.output("summarize", k)) for k in range(first, r + 1)]
-        theta, x = torch.cat([d[0] for d in data]), torch.cat([d[1] for d in data])
+        theta, x = self._fitted_space(torch.cat([d[0] for d in data])), torch.cat([d[1] for d in data])
         model = self.comp.model()
         if r > 1 and self.cfg.finetune:
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
-        history = model.fit(theta, x, seed=ctx.seed, label=f"round {r}")
+        # trained where the summaries were made: the training set stays on the GPU with device=cuda
+        dev = self.comp.device
+        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}")
         ctx.tb.losses(r, history)
-        theta_val, x_val = data[-1][2], data[-1][3]
+        theta_val, x_val = self._fitted_space(data[-1][2]), data[-1][3]
         d = self.comp.rc.diagnostics
         coverage = None if len(theta_val) == 0 else expected_coverage(
             model, theta_val, x_val, d.levels, d.coverage_samples, seed=ctx.seed)
-        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage}
+        # the gain over the prior is measured where the held-out parameters come from the prior: round 1
+        gain = None if len(theta_val) == 0 or r > 1 else held_out_gain(model, theta_val, x_val, self._fitted_prior())
+        guard = check_posterior(gain, coverage and coverage["hpd"])
+        for warning in guard.warnings:
+            log.warning("round %d: %s", r, warning)
+        return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
+                "held_out_gain": gain, "guard": guard.to_dict()}
+
+    def _fitted_space(self, theta: torch.Tensor) -> torch.Tensor:
+        return theta if self.probit is None else self.probit.to_probit(theta).float()
+
+    def _fitted_prior(self) -> ParameterDistribution:
+        return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
         """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
@@ -131,14 +164,36 @@ class BayesSim(InferenceMethod):
     def condition(self, ctx: RoundContext) -> dict:
         model = self.comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
-        real = real_trajectories(ctx)
-        x_real = self.comp.summarizer(real.to(self.comp.device)).cpu()
+        x_real = self.comp.summarizer(real_trajectories(ctx).to(self.comp.device)).cpu()
         try:
-            post = condition(model, x_real, self.comp.prior, self.cfg.max_components,
-                             proposal=self.proposal(ctx), seed=ctx.seed)
+            post, spread = condition(model, x_real, self.comp.prior, self.cfg.max_components,
+                                     proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
+                                     combination=self.cfg.combination)
         except ValueError as exc:
             raise PosteriorError(f"round {ctx.round}: {exc}") from exc
-        return {"posterior": post, "x_real": x_real, "predictive_distance": self._predictive(ctx, post, x_real)}
+        return {"posterior": post, "x_real": x_real, "dispersion": None if spread is None else spread.record()}
+
+    def model_check(self, ctx: RoundContext) -> dict:
+        """Can the simulator, at parameters the posterior allows, reproduce the real data? The summary
+        predictive check, the replayed check (each real trajectory's own start and actions, where the
+        task can restart from an observation) and the mismatch verdict (diagnostics/mismatch.py)."""
+        d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
+        posterior, x_real, real = conditioned["posterior"], conditioned["x_real"], real_trajectories(ctx)
+        check = None
+        if d.replay_sims and self.comp.task.state_from_observation(real.states[:1, 0].double().numpy()) is not None:
+            prior = self.comp.prior
+            check = replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real,
+                                   posterior, prior, num=d.replay_sims, seed=ctx.seed, alpha=d.mismatch_alpha,
+                                   max_distance_ratio=d.mismatch_distance_ratio)
+            ctx.tb.replays(ctx.round, check, list(self.comp.task.obs_names))
+        elif d.replay_sims:
+            log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
+                     ctx.round, self.comp.task.name)
+        outside = summaries_outside(x_real, ctx.output("summarize")["x"])
+        replay_record = None if check is None else check.record()
+        return {"predictive_distance": self._predictive(ctx, posterior, x_real), "replay_check": replay_record,
+                "mismatch": mismatch_report(ctx.round, outside, replay_record, conditioned["dispersion"],
+                                            d.mismatch_alpha)}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
         num = self.comp.rc.diagnostics.predictive_sims
@@ -146,7 +201,7 @@ class BayesSim(InferenceMethod):
             return None
 
         def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
-            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx), self.comp.rc.collect.horizon,
+            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), self.comp.rc.collect.horizon,
                                           ctx.seed).to(self.comp.device)
             x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
             return x[torch.isfinite(x).all(1)]
@@ -169,7 +224,10 @@ class BayesSim(InferenceMethod):
             "val_loss": hist["best_val"],
             "proposal": self.proposal_name(ctx),
             "coverage": fitted["coverage"],
-            "predictive_distance": ctx.output("condition")["predictive_distance"],
+            "held_out_gain": fitted["held_out_gain"],
+            "guard": fitted["guard"],
+            "dispersion": ctx.output("condition")["dispersion"],
+            **{k: v for k, v in ctx.output("model_check").items() if k != "seconds"},
         }
 
 

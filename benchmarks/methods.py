@@ -1,0 +1,65 @@
+"""Compare inference methods from the results.json files of finished runs (e.g. one --multirun sweep).
+
+    python -m bayessim_exp --config-dir sweeps --config-name methods --multirun   # Pendulum, Cartpole x 3 seeds
+    python benchmarks/methods.py multirun/<date_time>
+
+Per (task, method), over the seeds of finished runs, for the last round: the error of the mean to the true
+parameters (mean over parameters of |mean - true| / prior range), the log density at the true
+parameters and its gain over the prior, the real roll-outs used, simulated roll-outs, and the wall time
+of the run (from its config.yaml, written at the start, to its results.json, rewritten after every round:
+stage seconds in results.json leave out stages whose artifacts were deleted, such as BayesSim's collect).
+Prints mean ± sd over seeds, then each seed's value.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+from collections import defaultdict
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+
+def last_round(results: dict, run_dir: Path) -> dict:
+    names, true, rnd = results["param_names"], results["true_params"], results["rounds"][-1]
+    low, high = results["prior"]["low"], results["prior"]["high"]
+    error = statistics.fmean(abs(rnd["posterior_mean"][n] - true[n]) / (high[n] - low[n]) for n in names)
+    return {
+        "mean error / range": error,
+        "log p(true)": rnd["log_prob_true_posterior"],
+        "gain over prior": rnd["log_prob_gain"],
+        "real roll-outs": rnd["real_trajectories"],
+        "sim roll-outs": sum(r["sim_trajectories"] for r in results["rounds"]),
+        "wall s": (run_dir / "results.json").stat().st_mtime - (run_dir / "config.yaml").stat().st_mtime,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("dirs", nargs="+", type=Path, help="run or sweep directories to search for results.json")
+    args = parser.parse_args()
+    rows: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for d in args.dirs:
+        for path in sorted(d.rglob("results.json")):
+            results = json.loads(path.read_text())
+            finished = len(results["rounds"]) == OmegaConf.load(path.parent / "config.yaml").rounds
+            if results.get("true_params") and finished:
+                rows[(results["task"], results["method"])].append(last_round(results, path.parent))
+    if not rows:
+        raise SystemExit(f"no finished run with true parameters (results.json) under {args.dirs}")
+    keys = list(next(iter(rows.values()))[0])
+    print("| task | method | seeds | " + " | ".join(keys) + " |")
+    print("|---|---|---|" + "---|" * len(keys))
+    for (task, method), runs in sorted(rows.items()):
+        cells = []
+        for k in keys:
+            values = [r[k] for r in runs]
+            spread = f" ± {statistics.stdev(values):.3g}" if len(values) > 1 else ""
+            cells.append(f"{statistics.fmean(values):.3g}{spread} ({', '.join(f'{v:.3g}' for v in values)})")
+        print(f"| {task} | {method} | {len(runs)} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,182 @@
+"""Simulation throughput of every task on both backends, with and without randomization, in one run.
+
+    python benchmarks/sim_throughput.py [--tasks Pendulum,Humanoid] [--envs 8192,32768] [--horizon 100]
+        [--native-envs 8192] [--native-horizon 10] [--json out.json] [--compile-only]
+
+Env-steps/s counts control steps (each `frame_skip` physics steps; the physics rate is the product)
+over whole `rollout` calls: resets with per-env parameters (set_const on the host where the spec needs
+it), the open-loop random policy's actions, observations, rewards, divergence checks and the
+trajectories handed to torch. Rows per task:
+  native      NativeSimulator on all CPU threads, randomized: the baseline in the same run
+  mjx-plain   plain MJX on the nominal model (vmap(mjx.step) in lax.scan, random controls, no task code)
+  mjx-fixed   MjxSimulator with randomize=False (one model for every slot)
+  mjx         MjxSimulator with a parameter set per slot drawn from the prior's box
+"randomization overhead" = 1 - mjx / mjx-fixed at the same size. Each figure is the median of
+`--reps` timed calls after a first call (compilation, or a persistent-cache load, included, reported
+as `first s`). `--compile-only` makes the first calls alone, to fill JAX's persistent cache
+(`--cache-dir`) from several processes at once before a timed run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+
+os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from bayessim_exp import api, registry  # noqa: E402
+from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, jax_setup  # noqa: E402
+from bayessim_exp.sim.native import NativeConfig, NativeSimulator  # noqa: E402
+
+
+class OpenLoopRandom:
+    """Uniform random actions drawn where the simulator runs (the collect policy's distribution)."""
+
+    def __init__(self, action_dim: int, device: torch.device, seed: int = 0):
+        self.action_dim, self.device = action_dim, device
+        self.generator = torch.Generator(device=device).manual_seed(seed)
+
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        return torch.rand(obs.shape[0], self.action_dim, generator=self.generator, device=self.device) * 2 - 1
+
+    def open_loop_actions(self, n: int, horizon: int) -> torch.Tensor:
+        return torch.rand(n, horizon, self.action_dim, generator=self.generator, device=self.device) * 2 - 1
+
+
+def sync() -> None:
+    if torch.cuda.is_available():
+        torch.cuda.synchronize()
+
+
+def timed(call, reps: int) -> tuple[float, float | None]:
+    """(first call's seconds, median seconds of `reps` more calls or None)."""
+    t0 = time.perf_counter()
+    call()
+    sync()
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        call()
+        sync()
+        times.append(time.perf_counter() - t0)
+    return first, statistics.median(times) if times else None
+
+
+def prior_params(task, n: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(task.spec.low, task.spec.high, (n, task.spec.dim))
+
+
+def simulator_rollouts(task, envs: int, horizon: int, sim, reps: int) -> tuple[float, float | None]:
+    params = prior_params(task, envs)
+    policy = OpenLoopRandom(task.action_dim, sim.device)
+
+    def call():
+        traj = sim.rollout(params, policy, horizon, seed=1)
+        if traj.diverged.float().mean() > 0.01:
+            print(f"  note: {int(traj.diverged.sum())} of {envs} {task.name} slots diverged")
+
+    return timed(call, reps)
+
+
+def plain_mjx(task, envs: int, horizon: int, reps: int) -> tuple[float, float | None]:
+    import jax
+    from mujoco import mjx
+
+    m = task.model
+    mx = mjx.put_model(m)
+    data = jax.vmap(lambda _: mjx.make_data(mx))(jax.numpy.arange(envs))
+    lo, hi = jax.numpy.asarray(m.actuator_ctrlrange.T, jax.numpy.float32)
+
+    @jax.jit
+    def run(data, key):
+        def control(d, k):
+            ctrl = jax.random.uniform(k, (envs, m.nu), minval=lo, maxval=hi)
+            d = d.replace(ctrl=ctrl)
+            d = jax.lax.fori_loop(0, task.frame_skip, lambda _, x: jax.vmap(mjx.step, (None, 0))(mx, x), d)
+            return d, d.qpos[:, 0]
+        return jax.lax.scan(control, data, jax.random.split(key, horizon))
+
+    return timed(lambda: jax.block_until_ready(run(data, jax.random.PRNGKey(0))), reps)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--tasks", default=",".join(registry.names("task")))
+    ap.add_argument("--envs", default="8192,32768")
+    ap.add_argument("--horizon", type=int, default=100)
+    ap.add_argument("--native-envs", type=int, default=8192)
+    ap.add_argument("--native-horizon", type=int, default=10)
+    ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--baseline-envs", type=int, default=8192, help="size of the mjx-plain and mjx-fixed rows")
+    ap.add_argument("--cache-dir", default=None, help="JAX's persistent compilation cache")
+    ap.add_argument("--compile-only", action="store_true")
+    ap.add_argument("--skip-native", action="store_true")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    jax = jax_setup(args.cache_dir)
+    cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0)
+    reps = 0 if args.compile_only else args.reps
+    rows = []
+
+    def record(task, backend, envs, horizon, first, median):
+        rate = None if median is None else envs * horizon / median
+        rows.append({"task": task.name, "backend": backend, "envs": envs, "horizon": horizon,
+                     "frame_skip": task.frame_skip, "first_s": round(first, 2), "median_s": median,
+                     "env_steps_per_s": rate})
+        shown = "-" if rate is None else f"{rate:,.0f}"
+        print(f"{task.name:<16} {backend:<10} {envs:>8} x {horizon:<4} first {first:7.1f} s  {shown:>14} env-steps/s",
+              flush=True)
+
+    for name in args.tasks.split(","):
+        overrides = [f"task={name}"]
+        task = registry.build("task", api.compose(overrides).task)
+        task.name = name  # ShadowHand_more shares its class with ShadowHand
+        try:
+            if not args.skip_native and not args.compile_only:
+                sim = NativeSimulator(task, args.native_envs, NativeConfig(nthread=0, max_abs_qvel=1.0e4))
+                record(task, "native", args.native_envs, args.native_horizon,
+                       *simulator_rollouts(task, args.native_envs, args.native_horizon, sim, reps))
+            b = args.baseline_envs
+            record(task, "mjx-plain", b, args.horizon, *plain_mjx(task, b, args.horizon, reps))
+            record(task, "mjx-fixed", b, args.horizon,
+                   *simulator_rollouts(task, b, args.horizon, MjxSimulator(task, b, cfg, randomize=False), reps))
+            for envs in map(int, args.envs.split(",")):
+                record(task, "mjx", envs, args.horizon,
+                       *simulator_rollouts(task, envs, args.horizon, MjxSimulator(task, envs, cfg), reps))
+        except Exception as exc:  # one task's failure must not hide the others' figures
+            print(f"{name}: FAILED {type(exc).__name__}: {str(exc)[:300]}", flush=True)
+            rows.append({"task": name, "error": f"{type(exc).__name__}: {exc}"})
+        jax.clear_caches()
+        torch.cuda.empty_cache() if torch.cuda.is_available() else None
+
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"device": str(jax.devices()[0]), "torch": torch.__version__, "jax": jax.__version__,
+                       "rows": rows}, f, indent=1)
+    if args.compile_only:
+        return
+    print(f"\ndevice {jax.devices()[0]}; control steps/s, median of {args.reps} rollouts after a first call")
+    print(f"{'task':<16} {'backend':<10} {'envs':>8} {'env-steps/s':>14} {'vs native':>10} {'randomization overhead':>24}")
+    for r in rows:
+        if "error" in r:
+            print(f"{r['task']:<16} FAILED: {r['error'][:100]}")
+            continue
+        same = {x["backend"]: x for x in rows if x.get("task") == r["task"] and "error" not in x}
+        native = same.get("native", {}).get("env_steps_per_s")
+        vs = f"{r['env_steps_per_s'] / native:.1f}x" if native else ""
+        fixed = same.get("mjx-fixed")
+        overhead = (f"{1 - r['env_steps_per_s'] / fixed['env_steps_per_s']:+.1%}"
+                    if r["backend"] == "mjx" and fixed and r["envs"] == fixed["envs"] else "")
+        print(f"{r['task']:<16} {r['backend']:<10} {r['envs']:>8} {r['env_steps_per_s']:>14,.0f} {vs:>10} {overhead:>24}")
+
+
+if __name__ == "__main__":
+    main()

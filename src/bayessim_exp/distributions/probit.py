@@ -1,0 +1,114 @@
+"""Posteriors in probit space: the prior's box mapped onto R^D, where the prior is N(0, I).
+
+u_d = Phi^-1(F_d(theta_d)), with F_d the prior's marginal CDF (independent priors: uniform,
+log-uniform, truncated Gaussian). Under the prior u is exactly standard normal, so
+
+- a model fitted to (u, x) has the prior's box as its support once mapped back: no truncation,
+  no rejection, the normaliser is exact (a flow conditions in milliseconds at 102 parameters);
+- the prior is a Gaussian, so BayesSim's product over real trajectories and the SNPE-A correction
+  stay in closed form for mixtures, with no box to truncate to;
+- a model that learned nothing can say so exactly (N(0, I) is the prior), whereas a Gaussian
+  truncated to a uniform prior's box costs ~0.09 nats per parameter even at the prior's variance;
+- the log-density gain over the prior is the same in both spaces:
+  log q(theta | x) - log p(theta) = log q_u(u | x) - log N(u; 0, I).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch.special import ndtr, ndtri
+
+from .base import ParameterDistribution
+from .box import restrict_log_prob
+from .independent import BoxUniform, GaussianPrior, LogUniform
+
+# CDF values are kept this far from 0 and 1, so u stays finite (|u| <= 7.9) at the box's faces
+_EDGE = 1e-15
+_LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+
+
+def _std_normal_log_pdf(u: torch.Tensor) -> torch.Tensor:
+    return -0.5 * u**2 - _LOG_SQRT_2PI
+
+
+class ProbitTransform:
+    """theta (in the prior's box) <-> u in R^D with u ~ N(0, I) under the prior."""
+
+    def __init__(self, prior: ParameterDistribution):
+        if isinstance(prior, GaussianPrior) and prior.low is None or not isinstance(
+                prior, (BoxUniform, LogUniform, GaussianPrior)):
+            raise ValueError(f"probit space needs an independent prior on a box (uniform, loguniform or gaussian "
+                             f"with a box), got {type(prior).__name__}")
+        self.prior = prior
+        self.low, self.high = prior.low.double(), prior.high.double()
+
+    @property
+    def dim(self) -> int:
+        return self.low.shape[0]
+
+    def _cdf(self, theta: torch.Tensor) -> torch.Tensor:
+        p = self.prior
+        if isinstance(p, BoxUniform):
+            return (theta - self.low) / (self.high - self.low)
+        if isinstance(p, LogUniform):
+            return (torch.log(theta) - p._log_low) / (p._log_high - p._log_low)
+        return (ndtr((theta - p.loc) / p.scale) - p._cdf_low) / (p._cdf_high - p._cdf_low)
+
+    def _inverse_cdf(self, c: torch.Tensor) -> torch.Tensor:
+        p = self.prior
+        if isinstance(p, BoxUniform):
+            return self.low + c * (self.high - self.low)
+        if isinstance(p, LogUniform):
+            return torch.exp(p._log_low + c * (p._log_high - p._log_low))
+        return p.loc + p.scale * ndtri(p._cdf_low + c * (p._cdf_high - p._cdf_low))
+
+    def _log_marginals(self, theta: torch.Tensor) -> torch.Tensor:
+        """log p_d(theta_d) per coordinate: [..., D]."""
+        p = self.prior
+        if isinstance(p, BoxUniform):
+            return -torch.log(self.high - self.low).expand_as(theta)
+        if isinstance(p, LogUniform):
+            return -torch.log(theta) - torch.log(p._log_high - p._log_low)
+        z = (theta - p.loc) / p.scale
+        return _std_normal_log_pdf(z) - torch.log(p.scale) - torch.log(p._cdf_high - p._cdf_low)
+
+    def to_probit(self, theta: torch.Tensor) -> torch.Tensor:
+        unit = self._cdf(theta.double().clamp(self.low, self.high)).clamp(_EDGE, 1 - _EDGE)
+        return ndtri(unit)
+
+    def from_probit(self, u: torch.Tensor) -> torch.Tensor:
+        return self._inverse_cdf(ndtr(u.double())).clamp(self.low, self.high)
+
+    def log_abs_det_jacobian(self, theta: torch.Tensor) -> torch.Tensor:
+        """log |du/dtheta| = sum_d log p_d(theta_d) - log phi(u_d): [...]."""
+        theta = theta.double().clamp(self.low, self.high)
+        return (self._log_marginals(theta) - _std_normal_log_pdf(self.to_probit(theta))).sum(-1)
+
+
+def standard_normal_prior(dim: int) -> GaussianPrior:
+    """The prior in probit space."""
+    return GaussianPrior(torch.zeros(dim, dtype=torch.float64), torch.ones(dim, dtype=torch.float64))
+
+
+class ProbitPosterior(ParameterDistribution):
+    """A distribution over u mapped back to parameter units: exact density and sampling on the box."""
+
+    def __init__(self, inner: ParameterDistribution, transform: ProbitTransform):
+        self.inner, self.transform = inner, transform
+        self.low, self.high = transform.low, transform.high
+
+    @property
+    def dim(self) -> int:
+        return self.transform.dim
+
+    def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
+        return self.transform.from_probit(self.inner.sample(shape, generator=generator))
+
+    def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
+        theta = theta.double()
+        lp = self.inner.log_prob(self.transform.to_probit(theta)).double() + self.transform.log_abs_det_jacobian(theta)
+        return restrict_log_prob(lp, theta, self.low, self.high)
+
+

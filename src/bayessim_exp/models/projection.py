@@ -1,0 +1,69 @@
+"""Regression summaries: the summaries replaced by a ridge regression's prediction of the parameters.
+
+With hundreds of summary features (`start`, `corrdiff` on a humanoid) and a few thousand
+simulations, a network on the raw features overfits after a few epochs and its posteriors are
+overconfident. Predicting the parameters linearly first and feeding the D predictions to the
+network (semi-automatic ABC's summaries, Fearnhead & Prangle 2012) keeps what is linearly
+decodable in D inputs. The training inputs are out-of-fold predictions, so the network sees
+predictions as noisy as the ones it will get for new data; new data use the fit on all of it.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+_PENALTIES = (1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)  # tried on standardised summaries, best by held-out error
+_FOLDS = 5
+
+
+class RidgeSystem:
+    """The normal equations of [z, 1] W = y, formed once, solved for any penalty and any rows left out
+    (a fold's Gram matrix is subtracted rather than recomputed: thousands of features are common)."""
+
+    def __init__(self, z: torch.Tensor, y: torch.Tensor):
+        self.design = torch.cat([z.double(), torch.ones(len(z), 1, dtype=torch.float64, device=z.device)], 1)
+        self.y = y.double()
+        self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
+
+    def solve(self, penalty: float, leave_out: torch.Tensor | None = None) -> torch.Tensor:
+        """[F + 1, D] weights (last row: intercept, not penalised), fitted without the rows `leave_out` (bool)."""
+        gram, moment = self.gram, self.moment
+        if leave_out is not None:
+            d = self.design[leave_out]
+            gram, moment = gram - d.T @ d, moment - d.T @ self.y[leave_out]
+        reg = penalty * torch.ones(gram.shape[0], dtype=gram.dtype, device=gram.device)
+        reg[-1] = 0.0
+        return torch.linalg.solve(gram + torch.diag(reg), moment)
+
+    def predict(self, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+        return self.design[rows] @ weights
+
+
+class RidgeProjection(nn.Module):
+    """Standardised summaries [N, F] -> predicted standardised parameters [N, D]."""
+
+    def __init__(self, x_dim: int, theta_dim: int):
+        super().__init__()
+        self.register_buffer("weight", torch.zeros(x_dim, theta_dim))
+        self.register_buffer("bias", torch.zeros(theta_dim))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x @ self.weight + self.bias
+
+    @torch.no_grad()
+    def fit(self, x: torch.Tensor, theta: torch.Tensor, seed: int) -> torch.Tensor:
+        """Fit on all pairs; return the out-of-fold predictions for the same pairs [N, D]."""
+        system = RidgeSystem(x, theta)
+        folds = (torch.randperm(len(x), generator=torch.Generator().manual_seed(seed)) % _FOLDS).to(x.device)
+        held = folds == 0
+        errors = [float((system.y[held] - system.predict(held, system.solve(p, held))).pow(2).mean()) for p in _PENALTIES]
+        penalty = _PENALTIES[min(range(len(errors)), key=errors.__getitem__)]
+        out_of_fold = torch.empty_like(system.y)
+        for k in range(_FOLDS):
+            inside = folds == k
+            out_of_fold[inside] = system.predict(inside, system.solve(penalty, inside))
+        w = system.solve(penalty)
+        self.weight.copy_(w[:-1].float())
+        self.bias.copy_(w[-1].float())
+        return out_of_fold.float()

@@ -1,0 +1,122 @@
+"""Build a sweep's report: report.md, summary.csv (per configuration), jobs.csv (per job) and PNGs.
+
+Failed and unfinished jobs are listed, never fatal: the tables use the finished jobs only, and a
+figure that cannot be drawn is named in the report with the reason.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import logging
+import math
+from pathlib import Path
+
+from .figures import metric_figure, posterior_figure, rounds_figure
+from .jobs import Job, configuration_labels, read_jobs
+from .metrics import CONFIDENCE, Metric, interval, job_metrics, metrics_present
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass
+class Report:
+    out_dir: Path
+    jobs: list[Job]
+    figures: list[Path]
+    figure_problems: list[str]
+
+    def count(self, status: str) -> int:
+        return sum(j.status == status for j in self.jobs)
+
+
+def _fmt(value: float | None) -> str:
+    if value is None or not math.isfinite(value):
+        return ""
+    return f"{value:.3g}"
+
+
+def _cell(values: list[float | None], bounds) -> str:
+    mean, lo, hi = interval(values, bounds)
+    if math.isnan(mean):
+        return "–"
+    return _fmt(mean) if math.isnan(lo) else f"{_fmt(mean)} [{_fmt(lo)}, {_fmt(hi)}]"
+
+
+def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        writer.writerows(rows)
+
+
+def build_report(sweep_dir: str | Path, out_dir: str | Path | None = None, posteriors: bool = True) -> Report:
+    sweep_dir = Path(sweep_dir)
+    jobs = read_jobs(sweep_dir)
+    if not jobs:
+        raise FileNotFoundError(f"no job dirs under {sweep_dir} (looked for results.json, .hydra/ or error.txt)")
+    out = Path(out_dir) if out_dir is not None else sweep_dir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    labels = configuration_labels(jobs)
+    finished = [j for j in jobs if j.status == "finished"]
+    per_job = {j.path: job_metrics(j.results) for j in finished}
+    metrics = metrics_present(list(per_job.values()))
+    configs: dict[str, list[Job]] = {}
+    for job in jobs:
+        configs.setdefault(labels[job.path], [])
+    for job in finished:
+        configs[labels[job.path]].append(job)
+
+    def values(metric: Metric, config: str) -> list[float | None]:
+        return [per_job[j.path][metric.key] for j in configs[config]]
+
+    summary_rows = []
+    for config, done in configs.items():
+        all_jobs = [j for j in jobs if labels[j.path] == config]
+        row = [config, len(done), sum(j.status == "failed" for j in all_jobs), sum(j.status == "unfinished" for j in all_jobs)]
+        for metric in metrics:
+            row += [_fmt(v) for v in interval(values(metric, config), metric.bounds)]
+        summary_rows.append(row)
+    _write_csv(out / "summary.csv", ["configuration", "finished", "failed", "unfinished"]
+               + [f"{m.key}_{part}" for m in metrics for part in ("mean", "ci_low", "ci_high")], summary_rows)
+    _write_csv(out / "jobs.csv", ["job", "configuration", "seed", "status", "problem"] + [m.key for m in metrics],
+               [[j.path.relative_to(sweep_dir).as_posix() or ".", labels[j.path], j.seed, j.status, j.problem]
+                + [_fmt(per_job.get(j.path, {}).get(m.key)) for m in metrics] for j in jobs])
+
+    figures, problems = [], []
+    with_data = {c: d for c, d in configs.items() if d}
+    for metric in metrics:
+        figures.append(metric_figure(metric, {c: values(metric, c) for c in with_data}, out / f"{metric.key}.png"))
+    if with_data:
+        figures.append(rounds_figure(with_data, out / "gain_by_round.png"))
+    if posteriors:
+        for k, (config, done) in enumerate(with_data.items()):
+            target = out / f"posterior_{k:02d}.png"
+            try:
+                figures.append(posterior_figure(done[0], config, target))
+            except Exception as exc:  # a report lists what it could not draw and goes on
+                log.warning("posterior of %s: %s", done[0].path, exc)
+                problems.append(f"posterior of `{config}` ({done[0].path.name}): {type(exc).__name__}: {exc}")
+    report = Report(out, jobs, figures, problems)
+    (out / "report.md").write_text(_markdown(sweep_dir, report, configs, metrics, values))
+    return report
+
+
+def _markdown(sweep_dir: Path, report: Report, configs: dict[str, list[Job]], metrics: list[Metric], values) -> str:
+    lines = [f"# Sweep report: {sweep_dir}", "",
+             f"{len(report.jobs)} jobs: {report.count('finished')} finished, {report.count('failed')} failed, "
+             f"{report.count('unfinished')} unfinished. Each cell: the mean over the finished seeds of the final "
+             f"round, with the Student-t {CONFIDENCE:.0%} confidence interval of that mean in brackets (none with "
+             "one seed). Metrics: " + "; ".join(f"`{m.key}` = {m.label}" for m in metrics) + ".", ""]
+    header = ["configuration", "seeds"] + [f"`{m.key}`" for m in metrics]
+    lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for config, done in configs.items():
+        lines.append("| " + " | ".join([config, str(len(done))] + [_cell(values(m, config), m.bounds) for m in metrics]) + " |")
+    bad = [j for j in report.jobs if j.status != "finished"]
+    lines += ["", "## Failed or unfinished jobs", ""]
+    lines += [f"- `{j.path.relative_to(sweep_dir).as_posix() or '.'}`: {j.status}: {j.problem}" for j in bad] or ["none"]
+    lines += ["", "## Figures", ""]
+    lines += [f"![{p.stem}]({p.name})" for p in report.figures]
+    if report.figure_problems:
+        lines += ["", "Not drawn:", ""] + [f"- {p}" for p in report.figure_problems]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,283 @@
+"""GPU backend: N MJX (JAX) simulations of one task, each with its own parameters.
+
+Per-environment parameters are batched leaves of one `mjx.Model` (`jax.vmap` with in_axes 0 over the
+fields the ParamSpec touches, None elsewhere). MJX has no `set_const`: when the spec touches a field
+that mj_setConst reads (mass, inertia, geometry, ...), the derived constants are computed on the host
+with `mujoco.batch` for exactly the slots being reset, and those of them that change within the
+prior's range are batched too. Observations, rewards and terminations are the task's own array code,
+run with xp=jax.numpy inside the compiled step. Arrays reach torch through DLPack, without copies.
+
+Compilations: one step and one reset per simulator (the pool keeps one per batch size), one fused
+rollout per horizon; JAX's persistent compilation cache (`cache_dir`) keeps them across processes.
+A slot that breaks down is frozen at its last finite state, so it neither spreads NaNs nor keeps the
+solver iterating, and it stays flagged until its next reset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+# before jax is imported anywhere: JAX and torch share the GPU instead of JAX taking 75 % of it up front
+os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from mujoco import batch as mjbatch  # noqa: E402
+
+from ..errors import ConfigError  # noqa: E402
+from ..registry import register  # noqa: E402
+from ..tasks.base import Task  # noqa: E402
+from .base import Policy, Simulator, broke_down  # noqa: E402
+from .params import ParamSpec  # noqa: E402
+from .trajectories import Trajectories  # noqa: E402
+
+# fields MJX reads while tracing (collision pairs, sparsity, solver choice): one value for every slot
+_STATIC_FIELDS = frozenset({"geom_contype", "geom_conaffinity", "geom_condim", "geom_type", "geom_priority",
+                            "opt.iterations", "opt.ls_iterations", "opt.solver", "opt.cone", "opt.integrator",
+                            "opt.disableflags", "opt.enableflags", "opt.jacobian"})
+_PROBES = 8  # random parameter sets (besides the bounds) that decide which derived constants vary
+
+
+@dataclasses.dataclass
+class MjxConfig:
+    max_abs_qvel: float  # a joint speed beyond this counts as diverged
+    cache_dir: Any  # JAX's persistent compilation cache (str), or None: off
+    nthread: int  # CPU threads of the host-side set_const (0: all)
+
+    def validate(self) -> None:
+        if self.max_abs_qvel <= 0 or self.nthread < 0:
+            raise ConfigError("max_abs_qvel must be > 0 and nthread >= 0")
+
+
+def jax_setup(cache_dir: str | None) -> Any:
+    """Import jax with the persistent compilation cache in `cache_dir` (None: off)."""
+    import jax
+
+    if cache_dir:
+        jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache_dir)))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    return jax
+
+
+def gpu_visible() -> bool:
+    """JAX sees a GPU (and MJX is installed)."""
+    try:
+        import jax
+        from mujoco import mjx  # noqa: F401
+    except ImportError:
+        return False
+    return any(d.platform == "gpu" for d in jax.devices())
+
+
+def to_torch(x: Any) -> torch.Tensor:
+    return torch.from_dlpack(x)
+
+
+class MjxSimulator(Simulator):
+    """`randomize=False` runs every slot on the nominal model and ignores the parameters: what per-slot
+    parameters cost is measured against it (benchmarks/sim_throughput.py)."""
+
+    def __init__(self, task: Task, num_envs: int, cfg: MjxConfig, randomize: bool = True):
+        super().__init__(task, num_envs)
+        self.cfg, self.randomize = cfg, randomize
+        self.jax = jax = jax_setup(cfg.cache_dir)
+        from mujoco import mjx
+
+        self.jnp, self.mjx = jax.numpy, mjx
+        # every input committed to one device: a jitted function sees the same placement on every call
+        # (uncommitted first inputs and committed outputs would compile everything twice)
+        self._dev = jax.devices()[0]
+        m = task.model
+        self.nominal = mjx.put_model(task.mjx_model)  # with the task's MJX tuning
+        needs_set_const = randomize and task.spec.needs_set_const
+        self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if needs_set_const else None
+        names = list(task.spec.fields) + self._varying_constants() if randomize else []
+        for name in names:
+            leaf = _get(self.nominal, name)
+            if not isinstance(leaf, jax.Array) or not jax.numpy.issubdtype(leaf.dtype, jax.numpy.floating):
+                raise ConfigError(f"sim=mjx cannot set {name} per simulation: MJX keeps it static")
+        # host copies of every batched leaf, [N, ...]; resets write rows and upload the whole leaf
+        self._host = {n: np.repeat(np.asarray(_get(self.nominal, n))[None], num_envs, 0) for n in names}
+        self.leaves = {n: self._put(v, _get(self.nominal, n).dtype) for n, v in self._host.items()}
+        axes = jax.tree_util.tree_map(lambda _: None, self.nominal)
+        self._model_axes = axes.tree_replace({n: 0 for n in names})
+        template = mjx.make_data(self.nominal)
+        self.data = jax.tree_util.tree_map(lambda x: self._put(np.repeat(np.asarray(x)[None], num_envs, 0)), template)
+        self.obs = self._put(np.zeros((num_envs, task.obs_dim)), np.float32)
+        self.broken = self._put(np.zeros(num_envs, bool))  # since the last reset
+        lo, hi = m.actuator_ctrlrange.T
+        self._ctrl_mid, self._ctrl_half = (hi + lo) / 2, (hi - lo) / 2
+        self._reset_fn = jax.jit(self._reset_all)
+        self._step_fn = jax.jit(self._control_step)
+        self._rollouts: dict[int, Any] = {}
+
+    def _put(self, x: Any, dtype: Any = None) -> Any:
+        return self.jax.device_put(np.asarray(x, dtype), self._dev)
+
+    # configuration -----------------------------------------------------------------------
+    @classmethod
+    def check_spec(cls, spec: ParamSpec) -> None:
+        from mujoco import mjx
+
+        known = {f.name for f in dataclasses.fields(mjx.Model)} | {f"opt.{f.name}" for f in dataclasses.fields(mjx.Option)}
+        unsupported = [f for f in spec.fields if f not in known or f in _STATIC_FIELDS]
+        if unsupported:
+            raise ConfigError(f"sim=mjx cannot set {', '.join(unsupported)} per simulation (MJX has no such "
+                              "field or reads it while compiling); use sim=native")
+
+    @property
+    def device(self) -> torch.device:
+        dev = self.data.qpos.devices().pop()
+        return torch.device("cuda", dev.id) if dev.platform == "gpu" else torch.device("cpu")
+
+    def _varying_constants(self) -> list[str]:
+        """Constants mj_setConst derives that change within the prior's box (batched alongside)."""
+        if self._setconst is None:
+            return []
+        spec, m = self.task.spec, self.task.model
+        rng = np.random.default_rng(0)
+        probes = np.concatenate([spec.low[None], spec.high[None], rng.uniform(spec.low, spec.high, (_PROBES, spec.dim))])
+        probe = mjbatch.Batch(m, len(probes), nthread=1)
+        for name, vals in spec.field_values(m, probes).items():
+            probe.expand(name)[:] = vals.reshape(probe.expand(name).shape)
+        probe.set_const()
+        out = []
+        for name in mujoco.MjModel._setconst_outputs:
+            values = probe.expanded(name)
+            if (name in spec.fields or values is None or values.dtype.kind != "f"
+                    or not hasattr(self.nominal, name) or np.allclose(values, getattr(m, name)[None], rtol=1e-9, atol=0)):
+                continue
+            out.append(name)
+        return out
+
+    # the compiled pieces -------------------------------------------------------------------
+    def _model(self, leaves: dict) -> Any:
+        return self.nominal.tree_replace(leaves)
+
+    def _reset_all(self, leaves, data, obs, broken, mask, state):
+        """Fresh data with `state` and a forward pass in the slots of `mask`; the others keep theirs."""
+        jax, jnp = self.jax, self.jnp
+        fresh = self._fresh(data, state)
+        fresh = jax.vmap(self.mjx.forward, in_axes=(self._model_axes, 0))(self._model(leaves), fresh)
+        data = _where(jnp, mask, fresh, data)
+        new_obs = jnp.asarray(self.task.observe(data, xp=jnp), jnp.float32)
+        obs = jnp.where(mask[:, None], new_obs, obs)
+        return data, obs, broken & ~mask
+
+    def _control_step(self, leaves, data, obs, broken, actions):
+        jax, jnp = self.jax, self.jnp
+        mx = self._model(leaves)
+        before = data
+        data = data.replace(ctrl=jnp.asarray(self._ctrl_mid + self._ctrl_half * jnp.clip(actions, -1.0, 1.0),
+                                             data.ctrl.dtype))
+        step = jax.vmap(self.mjx.step, in_axes=(self._model_axes, 0))
+        data = jax.lax.fori_loop(0, self.task.frame_skip, lambda _, d: step(mx, d), data)
+        now_broken = broke_down(data.qpos, data.qvel, self.cfg.max_abs_qvel, xp=jnp)
+        held = now_broken | broken
+        data = _where(jnp, held, before, data)  # frozen at the last finite state: never poisons the batch
+        new_obs = jnp.where(held[:, None], obs, jnp.asarray(self.task.observe(data, xp=jnp), jnp.float32))
+        reward = jnp.asarray(self.task.reward(obs, actions, new_obs, xp=jnp), jnp.float32)
+        terminated = jnp.asarray(self.task.terminated(new_obs, xp=jnp), bool)
+        return data, new_obs, held, reward, terminated, now_broken
+
+    def _fresh(self, data, state):
+        jnp = self.jnp
+        template = self.mjx.make_data(self.nominal)
+        fresh = self.jax.tree_util.tree_map(lambda t, d: jnp.broadcast_to(t, d.shape).astype(d.dtype), template, data)
+        return fresh.replace(**{k: jnp.asarray(v, getattr(data, k).dtype).reshape(getattr(data, k).shape)
+                                for k, v in state.items()})
+
+    # the protocol ------------------------------------------------------------------------------
+    def _reset(self, params: torch.Tensor, ids: torch.Tensor, state: dict[str, np.ndarray]) -> torch.Tensor:
+        ids_np = ids.numpy()
+        values = self.task.spec.field_values(self.task.model, params.numpy()) if self.randomize else {}
+        if self._setconst is not None:
+            for name, vals in values.items():
+                target = self._setconst.expand(name)
+                target[ids_np] = vals.reshape((len(ids_np),) + target.shape[1:])
+            self._setconst.set_const(ids_np)
+            for name in self._host:
+                if name not in values:  # batch.set_const leaves a constant shared while no slot changed it
+                    derived = self._setconst.expanded(name)
+                    values[name] = (np.repeat(getattr(self.task.model, name)[None], len(ids_np), 0) if derived is None
+                                    else derived[ids_np])
+        for name, vals in values.items():
+            self._host[name][ids_np] = vals.reshape((len(ids_np),) + self._host[name].shape[1:])
+        self.leaves = {n: self._put(v, self.leaves[n].dtype) for n, v in self._host.items()}
+        mask = np.zeros(self.num_envs, bool)
+        mask[ids_np] = True
+        full_state = {}
+        for field, v in state.items():
+            current = getattr(self.data, field)
+            arr = np.zeros(current.shape, current.dtype)
+            arr[ids_np] = np.asarray(v).reshape((len(ids_np),) + current.shape[1:])
+            full_state[field] = self._put(arr)
+        self.data, self.obs, self.broken = self._reset_fn(self.leaves, self.data, self.obs, self.broken,
+                                                          self._put(mask), full_state)
+        return to_torch(self.obs)[ids.to(self.device)]
+
+    def _step(self, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        act = self.jnp.from_dlpack(actions.detach().float().to(self.device).contiguous())
+        self.data, self.obs, self.broken, reward, terminated, broken = self._step_fn(
+            self.leaves, self.data, self.obs, self.broken, act)
+        return to_torch(self.obs), to_torch(reward), to_torch(terminated), to_torch(broken)
+
+    # the fused rollout: same Trajectories as Simulator.rollout, one compiled loop ------------------
+    def rollout(self, params, policy: Policy, horizon: int, seed: int = 0, progress: bool = False,
+                state: dict[str, np.ndarray] | None = None) -> Trajectories:
+        """Simulator.rollout in one compiled `lax.scan` when the policy is open-loop (its actions do not
+        read the observations: `open_loop_actions`); otherwise the generic step-by-step loop."""
+        if not hasattr(policy, "open_loop_actions"):
+            return super().rollout(params, policy, horizon, seed, progress, state)
+        self.reset(params, None, seed, state)
+        actions = policy.open_loop_actions(self.num_envs, horizon).to(self.device, torch.float32).clamp(-1.0, 1.0)
+        if horizon not in self._rollouts:
+            self._rollouts[horizon] = self.jax.jit(self._scan)
+        out = self._rollouts[horizon](self.leaves, self.data, self.obs, self.broken,
+                                      self.jnp.from_dlpack(actions.transpose(0, 1).contiguous()))
+        self.data, self.obs, self.broken, states, acts, rewards, valid, diverged = out
+        self.elapsed += horizon
+        self.diverged |= to_torch(diverged).cpu()
+        return Trajectories(states=to_torch(states), actions=to_torch(acts), rewards=to_torch(rewards),
+                            valid=to_torch(valid), diverged=to_torch(diverged), dt=self.task.cfg.control_dt)
+
+    def _scan(self, leaves, data, obs, broken, actions):
+        """actions [T, N, A]; the bookkeeping of Simulator.step and Simulator.rollout, step by step."""
+        jax, jnp = self.jax, self.jnp
+
+        def body(carry, act):
+            data, obs, held, alive, diverged, last = carry
+            data, obs, held, reward, terminated, now_broken = self._control_step(leaves, data, obs, held, act)
+            diverged = diverged | now_broken
+            terminated = terminated & ~diverged
+            alive = alive & ~diverged
+            out = (jnp.where(alive[:, None], obs, last), jnp.where(alive[:, None], act, 0.0),
+                   jnp.where(alive, reward, 0.0), alive)
+            state = jnp.where(alive[:, None], obs, last)
+            return (data, obs, held, alive & ~terminated, diverged, state), out
+
+        n = obs.shape[0]
+        init = (data, obs, broken, jnp.ones(n, bool), jnp.zeros(n, bool), obs)
+        (data, obs, broken, _, diverged, _), (states, acts, rewards, valid) = jax.lax.scan(body, init, actions)
+        states = jnp.concatenate([init[-1][:, None], states.transpose(1, 0, 2)], 1)
+        return (data, obs, broken, states, acts.transpose(1, 0, 2), rewards.T, valid.T, diverged)
+
+
+def _get(model: Any, name: str) -> Any:
+    return getattr(model.opt, name[4:]) if name.startswith("opt.") else getattr(model, name)
+
+
+def _where(jnp: Any, mask: Any, a: Any, b: Any) -> Any:
+    """Per slot: a where mask, else b, over every leaf of two batched pytrees."""
+    import jax
+
+    return jax.tree_util.tree_map(lambda x, y: jnp.where(mask.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), a, b)
+
+
+@register("sim", "mjx", MjxConfig)
+def mjx_backend(cfg: MjxConfig):
+    """The sim group builds a factory: (task, num_envs) -> simulator."""
+    return lambda task, num_envs: MjxSimulator(task, num_envs, cfg)

@@ -1,0 +1,90 @@
+"""Probit space against known answers: the prior is N(0, I) there, densities map back exactly,
+and conditioning a linear-Gaussian model there matches the closed-form posterior in u."""
+
+import math
+
+import pytest
+import torch
+from linear_gaussian import LinearGaussian
+
+from bayessim_exp import api
+from bayessim_exp.distributions.independent import BoxUniform, GaussianPrior, LogUniform
+from bayessim_exp.distributions.mixture import GaussianMixture
+from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
+from bayessim_exp.inference.bayessim.condition import condition
+
+LOW, HIGH = torch.tensor([0.1, 1.0, -2.0], dtype=torch.float64), torch.tensor([5.0, 3.0, 4.0], dtype=torch.float64)
+PRIORS = {
+    "uniform": BoxUniform(LOW, HIGH),
+    "loguniform": LogUniform(LOW[:2], HIGH[:2]),
+    "gaussian": GaussianPrior(torch.tensor([1.0, 2.5, 0.0]), torch.tensor([2.0, 0.5, 1.0]), LOW, HIGH),
+}
+
+
+@pytest.mark.parametrize("name", PRIORS)
+def test_prior_draws_are_standard_normal_in_probit_space(name):
+    prior = PRIORS[name]
+    torch.manual_seed(0)
+    theta = prior.sample((20000,)).double()
+    u = ProbitTransform(prior).to_probit(theta)
+    assert u.mean(0).abs().max() < 0.03
+    assert (u.std(0) - 1).abs().max() < 0.03
+    assert torch.allclose(ProbitTransform(prior).from_probit(u), theta, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", PRIORS)
+def test_standard_normal_maps_back_to_the_prior_density(name):
+    prior = PRIORS[name]
+    transform = ProbitTransform(prior)
+    back = ProbitPosterior(standard_normal_prior(transform.dim), transform)
+    torch.manual_seed(1)
+    theta = prior.sample((500,)).double()
+    assert torch.allclose(back.log_prob(theta), prior.log_prob(theta).double(), atol=1e-9)
+    outside = theta[:1].clone()
+    outside[0, 0] = transform.high[0] + 1
+    assert back.log_prob(outside)[0] == -math.inf
+
+
+def test_a_posterior_mapped_back_is_normalised_on_the_box():
+    prior = BoxUniform(LOW[:1], HIGH[:1])
+    inner = GaussianMixture(torch.zeros(2), torch.tensor([[-1.0], [1.5]]), torch.tensor([[[0.3]], [[0.05]]]))
+    post = ProbitPosterior(inner, ProbitTransform(prior))
+    grid = torch.linspace(float(LOW[0]), float(HIGH[0]), 200_001, dtype=torch.float64)[1:-1, None]
+    mass = torch.trapezoid(post.log_prob(grid).exp(), grid[:, 0])
+    assert abs(float(mass) - 1) < 1e-4
+    draws = post.sample((50_000,))
+    assert ((draws >= LOW[0]) & (draws <= HIGH[0])).all()
+    # the mean of draws matches the density's mean
+    mean = torch.trapezoid(grid[:, 0] * post.log_prob(grid).exp(), grid[:, 0])
+    assert abs(float(draws.mean()) - float(mean)) < 0.02
+
+
+def test_probit_conditioning_of_a_linear_gaussian_model_matches_the_closed_form():
+    """x = A u + b + noise with u the probit of theta: the linear model recovers A, and the posterior in u
+    given two observations is the Gaussian posterior under the N(0, I) prior."""
+    torch.set_num_threads(1)
+    prior = BoxUniform(LOW[:2], HIGH[:2])
+    transform = ProbitTransform(prior)
+    sim = LinearGaussian(torch.tensor([[1.0, 0.5], [-0.3, 2.0], [0.7, 0.0]]), torch.tensor([0.1, -0.2, 0.3]),
+                         0.2 * torch.eye(3))
+    torch.manual_seed(2)
+    theta = prior.sample((20000,)).double()
+    x = sim.simulate(transform.to_probit(theta), seed=3)
+    fitted = api.fit_posterior_model("linear", theta, x, prior=prior, probit=True)
+    u_true = torch.tensor([[0.5, -1.0]], dtype=torch.float64)
+    xs = sim.simulate(u_true.expand(2, 2), seed=4)
+    post = fitted.posterior(xs)
+    mean, cov = sim.posterior(torch.zeros(2), torch.eye(2), xs)
+    assert torch.allclose(post.inner.mean, mean, atol=0.03)
+    assert torch.allclose(post.inner.covariance, cov, rtol=0.1, atol=2e-3)  # held-out residuals: 2000 draws
+    theta_true = transform.from_probit(u_true)
+    expected = torch.distributions.MultivariateNormal(mean, cov).log_prob(u_true) + transform.log_abs_det_jacobian(theta_true)
+    assert torch.allclose(post.log_prob(theta_true), expected, atol=0.05)
+
+
+def test_probit_conditioning_refuses_a_proposal_in_parameter_units():
+    prior = BoxUniform(LOW[:2], HIGH[:2])
+    fitted = api.fit_posterior_model("linear", prior.sample((200,)), torch.randn(200, 3), prior=prior, probit=True)
+    proposal = GaussianPrior(torch.tensor([1.0, 2.0]), torch.tensor([1.0, 1.0]), LOW[:2], HIGH[:2])
+    with pytest.raises(ValueError, match="probit-space model cannot correct"):
+        condition(fitted.model, torch.randn(3), prior, proposal=proposal, probit=fitted.probit)

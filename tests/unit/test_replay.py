@@ -1,0 +1,73 @@
+"""Replaying recorded trajectories: observation -> state hooks, exact replays, and the replayed check."""
+
+import numpy as np
+import pytest
+import torch
+
+from bayessim_exp import registry
+from bayessim_exp.diagnostics.replay import replay
+from bayessim_exp.diagnostics.replayed_check import replayed_check
+from bayessim_exp.distributions.mixture import GaussianMixture
+from bayessim_exp.policies import RandomPolicy
+from bayessim_exp.sim.pool import SimulatorPool
+
+
+def _task(compose, name):
+    return registry.build("task", compose([f"task={name}"]).task)
+
+
+def _pool(task):
+    return SimulatorPool(registry.build("sim", {"name": "native"}), task, chunk=4096)
+
+
+@pytest.mark.parametrize("name", ["Pendulum", "Cartpole"])
+def test_the_state_recovered_from_an_observation_reproduces_it(compose, name):
+    task = _task(compose, name)
+    sim = _pool(task).get(6)
+    obs = sim.reset(np.repeat(task.real_values[None], 6, 0), None, seed=0).double().numpy()
+    again = sim.reset(np.repeat(task.real_values[None], 6, 0), None, seed=1, state=task.state_from_observation(obs))
+    np.testing.assert_allclose(again.numpy(), obs, atol=1e-6)  # observations are float32
+
+
+def test_a_task_without_the_hook_says_so(compose):
+    task = _task(compose, "Ant")
+    assert task.state_from_observation(np.zeros((1, task.obs_dim))) is None
+    with pytest.raises(ValueError, match="Ant cannot map an observation"):
+        replay(_pool(task), torch.as_tensor(task.real_values)[None], _recorded(task, task.real_values, n=1), torch.arange(1))
+
+
+def _recorded(task, params, n=3, horizon=20, seed=0):
+    sim = _pool(task).get(n)
+    return sim.rollout(np.repeat(np.asarray(params)[None], n, 0), RandomPolicy(task.action_dim, seed), horizon, seed=seed)
+
+
+def test_a_replay_at_the_recording_parameters_is_the_recording(compose):
+    task = _task(compose, "Pendulum")
+    real = _recorded(task, [1.3, 0.6])
+    out = replay(_pool(task), torch.tensor([[1.3, 0.6]] * 3), real, torch.arange(3))
+    torch.testing.assert_close(out.states, real.states, atol=1e-5, rtol=0)
+
+
+def _check(task, real, posterior_mean, prior):
+    posterior = GaussianMixture(torch.zeros(1), torch.tensor([posterior_mean], dtype=torch.float64),
+                                torch.diag(torch.tensor([0.01, 0.002], dtype=torch.float64)) ** 2 * torch.ones(1, 1, 1))
+    pool = _pool(task)
+
+    def simulate(theta, which):
+        return replay(pool, theta.clamp(prior.low, prior.high), real, which)
+
+    return replayed_check(simulate, real, posterior, prior, num=100, seed=0, alpha=0.01, max_distance_ratio=0.15)
+
+
+def test_the_replayed_check_passes_a_posterior_at_the_truth_and_flags_one_elsewhere(compose):
+    cfg = compose([])
+    task = registry.build("task", cfg.task)
+    prior = registry.build("prior", cfg.prior, spec=task.spec)
+    real = _recorded(task, [1.3, 0.6])
+    good = _check(task, real, [1.3, 0.6], prior)
+    assert good.flagged == []
+    assert min(good.p_value) > 0.01
+    assert max(np.divide(good.distance_posterior, good.distance_prior)) < 0.1
+    wrong = _check(task, real, [0.8, 0.45], prior)
+    assert wrong.flagged == [0, 1, 2]
+    assert wrong.record()["p_value"] == pytest.approx([1 / 101] * 3)

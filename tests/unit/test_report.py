@@ -1,0 +1,110 @@
+"""The sweep report over a hand-made sweep dir: statuses, per-configuration intervals, and failures listed, not fatal."""
+
+import csv
+import json
+import os
+import time
+
+import pytest
+import yaml
+
+from bayessim_exp.report.__main__ import main
+from bayessim_exp.report.build import build_report
+from bayessim_exp.report.metrics import interval
+
+
+def results(seed, gains, summarizer="start", coverage=0.5):
+    rounds = [{"round": r + 1, "log_prob_gain": g, "posterior_std": {"a": 0.1, "b": 0.4}, "prior_std": {"a": 0.2, "b": 0.4},
+               "coverage": {"hpd": {"0.5": coverage}}, "surrogate_real_return": None,
+               "seconds": {"collect": 1.0, "fit": 2.0}} for r, g in enumerate(gains)]
+    return {"task": "Pendulum", "model": "mdnn", "summarizer": summarizer, "policy": "random", "seed": seed,
+            "param_names": ["a", "b"], "true_params": {"a": 1.0, "b": 2.0}, "rounds": rounds}
+
+
+def make_job(sweep, name, overrides, rounds=2, result=None, error=None, raw=None):
+    job = sweep / name
+    (job / ".hydra").mkdir(parents=True)
+    (job / ".hydra" / "overrides.yaml").write_text(yaml.safe_dump(overrides))
+    (job / ".hydra" / "config.yaml").write_text(yaml.safe_dump({"rounds": rounds, "seed": 0}))
+    if result is not None:
+        (job / "results.json").write_text(json.dumps(result))
+    if raw is not None:
+        (job / "results.json").write_text(raw)
+    if error is not None:
+        (job / "error.txt").write_text(error)
+    return job
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    sweep = tmp_path / "sweep"
+    common = ["debug=smoke"]
+    make_job(sweep, "0_start_s0", ["summarizer=start", "seed=0", *common], result=results(0, [0.5, 1.0], coverage=0.4))
+    make_job(sweep, "1_start_s1", ["summarizer=start", "seed=1", *common], result=results(1, [1.5, 3.0], coverage=0.9))
+    make_job(sweep, "2_way_s0", ["summarizer=waypoints", "seed=0", *common],
+             result=results(0, [0.2, 2.0], "waypoints"))
+    make_job(sweep, "3_way_s1", ["summarizer=waypoints", "seed=1", *common], result=results(1, [0.1], "waypoints"))
+    make_job(sweep, "4_corr_s0", ["summarizer=corr", "seed=0", *common],
+             error="Traceback (most recent call last):\n  ...\nPosteriorError: round 1: no mass in the box\n")
+    make_job(sweep, "5_corr_s1", ["summarizer=corr", "seed=1", *common])
+    make_job(sweep, "6_corr_s2", ["summarizer=corr", "seed=2", *common], raw="{not json")
+    # failed once, then rerun to the end in the same dir: the newer results.json wins
+    job = make_job(sweep, "7_way_s2", ["summarizer=waypoints", "seed=2", *common], error="killed\n")
+    old = time.time() - 60
+    os.utime(job / "error.txt", (old, old))
+    (job / "results.json").write_text(json.dumps(results(2, [0.3, 1.0], "waypoints")))
+    (sweep / ".submitit" / "12_0").mkdir(parents=True)  # launcher files are not jobs
+    return sweep
+
+
+def test_statuses_intervals_and_failures(sweep):
+    report = build_report(sweep)
+    status = {j.path.name: (j.status, j.problem) for j in report.jobs}
+    assert [j.path.name for j in report.jobs] == [f"{k}_{n}" for k, n in enumerate(
+        ["start_s0", "start_s1", "way_s0", "way_s1", "corr_s0", "corr_s1", "corr_s2", "way_s2"])]
+    assert status["3_way_s1"] == ("unfinished", "1 of 2 rounds")
+    assert status["4_corr_s0"] == ("failed", "PosteriorError: round 1: no mass in the box")
+    assert status["5_corr_s1"] == ("unfinished", "no results.json")
+    assert status["6_corr_s2"][0] == "failed" and "unreadable" in status["6_corr_s2"][1]
+    assert status["7_way_s2"][0] == "finished"
+
+    with (sweep / "report" / "summary.csv").open() as f:
+        rows = {r["configuration"]: r for r in csv.DictReader(f)}
+    assert set(rows) == {"summarizer=start", "summarizer=waypoints", "summarizer=corr"}  # debug=smoke is shared
+    start = rows["summarizer=start"]
+    # gains 1 and 3: mean 2, standard error 1, t(0.975, 1 dof) = 12.706
+    assert (start["finished"], start["log_prob_gain_mean"], start["log_prob_gain_ci_low"],
+            start["log_prob_gain_ci_high"]) == ("2", "2", "-10.7", "14.7")
+    assert float(start["std_ratio_mean"]) == pytest.approx(0.75)
+    assert float(start["coverage_hpd_0.5_ci_low"]) == 0.0 and float(start["coverage_hpd_0.5_ci_high"]) == 1.0
+    assert float(start["wall_seconds_mean"]) == pytest.approx(6.0)
+    assert "surrogate_real_return_mean" not in start  # no job ran RL
+    assert (rows["summarizer=corr"]["finished"], rows["summarizer=corr"]["failed"],
+            rows["summarizer=corr"]["unfinished"]) == ("0", "2", "1")
+
+    markdown = (sweep / "report" / "report.md").read_text()
+    assert "8 jobs: 4 finished, 2 failed, 2 unfinished" in markdown
+    assert "| summarizer=start | 2 | 2 [-10.7, 14.7] |" in markdown
+    assert "`4_corr_s0`: failed: PosteriorError: round 1: no mass in the box" in markdown
+    # the hand-made jobs have no run artifacts: their posteriors are listed as not drawn, the report goes on
+    assert "Not drawn:" in markdown and len(report.figure_problems) == 2
+    assert {p.name for p in report.figures} >= {"log_prob_gain.png", "std_ratio.png", "gain_by_round.png"}
+    assert all(p.stat().st_size > 1000 for p in report.figures)
+
+
+def test_cli_exit_codes(sweep, tmp_path, capsys):
+    assert main([str(sweep), "--no-posteriors", "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "8 jobs: 4 finished, 2 failed, 2 unfinished" in out and "4_corr_s0" in out
+    assert (tmp_path / "out" / "report.md").is_file()
+    assert main([str(tmp_path / "nowhere")]) == 2
+    (tmp_path / "empty").mkdir()
+    assert main([str(tmp_path / "empty")]) == 2
+    assert "no job dirs" in capsys.readouterr().err
+
+
+def test_interval():
+    assert interval([2.0]) == (2.0, pytest.approx(float("nan"), nan_ok=True), pytest.approx(float("nan"), nan_ok=True))
+    mean, lo, hi = interval([1.0, 2.0, 3.0, None])
+    assert mean == 2.0 and hi - mean == pytest.approx(4.302653 * 1.0 / 3 ** 0.5)
+    assert interval([0.9, 1.0], bounds=(0.0, 1.0))[2] == 1.0

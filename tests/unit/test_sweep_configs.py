@@ -1,0 +1,84 @@
+"""Every stored sweep and launcher preset composes, names only options that exist, and says how to run it."""
+
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.override_parser.overrides_parser import OverridesParser
+
+from bayessim_exp import registry
+from bayessim_exp.run_config import check_run_config
+
+REPO = Path(__file__).resolve().parents[2]
+SWEEPS = sorted((REPO / "sweeps").glob("*.yaml"))
+LAUNCHERS = sorted((REPO / "conf" / "hydra" / "launcher").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", SWEEPS + LAUNCHERS, ids=lambda p: p.stem)
+def test_starts_with_a_comment_naming_its_command(path):
+    head = path.read_text().splitlines()[:3]
+    assert head[0].startswith("# ") and any("python -m bayessim_exp" in line or "make sweep" in line for line in head)
+
+
+def compose_sweep(name: str, overrides=(), hydra=False):
+    """As `python -m bayessim_exp --config-dir sweeps --config-name <name>` composes it."""
+    from bayessim_exp.api import CONF_DIR
+
+    with initialize_config_dir(config_dir=str(REPO / "sweeps"), version_base="1.3"):
+        return compose(config_name=name, overrides=[f"hydra.searchpath=[file://{CONF_DIR.resolve()}]", *overrides],
+                       return_hydra_config=hydra)
+
+
+def sweep_values(name: str):
+    cfg = compose_sweep(name, hydra=True)
+    parsed = OverridesParser.create().parse_overrides([f"{k}={v}" for k, v in cfg.hydra.sweeper.params.items()])
+    return cfg, {o.key_or_group: [str(v) for v in o.sweep_string_iterator()] if o.is_sweep_override() else [str(o.value())]
+                 for o in parsed}
+
+
+@pytest.mark.parametrize("path", SWEEPS, ids=lambda p: p.stem)
+def test_every_swept_value_composes_to_a_valid_run(path):
+    cfg, values = sweep_values(path.stem)
+    assert str(cfg.hydra.sweep.dir).startswith(f"multirun/{path.stem}/")  # the sweep dir carries its name
+    assert len(values.get("seed", [])) >= 3  # a spread over seeds, not one run
+    for key, options in values.items():
+        for option in options:
+            job = compose_sweep(path.stem, [f"{key}={option}"])
+            check_run_config(job)
+            for group in registry.GROUPS:
+                registry.parse_params(group, job[group])
+
+
+def launcher(overrides):
+    from bayessim_exp.api import CONF_DIR
+
+    with initialize_config_dir(config_dir=str(CONF_DIR.resolve()), version_base="1.3"):
+        return compose(config_name="config", overrides=overrides, return_hydra_config=True).hydra.launcher
+
+
+def test_slurm_presets_take_overrides_and_submitit_accepts_every_key(tmp_path):
+    import submitit
+    from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
+    from omegaconf import OmegaConf
+
+    gpu = launcher(["hydra/launcher=slurm_gpu", "hydra.launcher.partition=a100", "hydra.launcher.timeout_min=30",
+                    "hydra.launcher.srun_args=['--cpu-bind=none']"])
+    assert (gpu.partition, gpu.timeout_min, gpu.gpus_per_node, gpu.cpus_per_task, gpu.mem_gb) == ("a100", 30, 1, 8, 32)
+    assert list(gpu.srun_args) == ["--cpu-bind=none"]
+    assert gpu.max_num_timeout > 0  # timed-out jobs are requeued: stages resume from the run dir
+    cpu = launcher(["hydra/launcher=slurm_cpu"])
+    assert cpu.gpus_per_node is None
+    # what the launcher hands submitit (submitit_launcher.py: keys outside BaseQueueConf get the slurm_ prefix)
+    params = OmegaConf.to_container(cpu, resolve=False)
+    params.pop("_target_"), params.pop("submitit_folder")
+    executor = submitit.AutoExecutor(folder=tmp_path, cluster="slurm", slurm_max_num_timeout=params.pop("max_num_timeout"))
+    base = set(OmegaConf.structured(BaseQueueConf).keys())
+    params["name"] = "job"  # ${hydra.job.name} resolves only inside a run
+    executor.update_parameters(**{k if k in base else f"slurm_{k}": v for k, v in params.items()})  # raises on unknown keys
+    with pytest.raises(Exception, match="partiton"):
+        launcher(["hydra/launcher=slurm_cpu", "hydra.launcher.partiton=x"])
+
+
+def test_local_preset_is_the_joblib_launcher():
+    local = launcher(["hydra/launcher=local", "hydra.launcher.n_jobs=3"])
+    assert local._target_.endswith("JoblibLauncher") and local.n_jobs == 3

@@ -10,7 +10,7 @@ rewards zero, so bootstrapping from it would teach the critic a fiction; it rest
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import torch

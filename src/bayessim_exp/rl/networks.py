@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from tensordict.nn import AddStateIndependentNormalScale, TensorDictModule
 from torch import nn
-from torchrl.modules import IndependentNormal, MLP, ProbabilisticActor, ValueOperator
+from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 
 
 class RunningNorm(nn.Module):

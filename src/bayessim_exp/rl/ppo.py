@@ -8,7 +8,7 @@ and the clipped objective is minimised for `epochs` passes over shuffled minibat
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 from torchrl.collectors import Collector

@@ -33,9 +33,11 @@ class Components:
     def device(self) -> torch.device:
         return torch.device(self.rc.device)
 
-    def policy(self, seed: int):
-        """The collect policy, seeded."""
-        return registry.build("policy", self.cfg.policy, action_dim=self.task.action_dim, seed=seed)
+    def policy(self, seed: int, ctx=None):
+        """The collect policy, seeded; within a round (ctx) `rl`/`rl_randomized` act with the latest trained actor."""
+        actor = self.rl.actor(ctx) if self.rl is not None and ctx is not None else None
+        return registry.build("policy", self.cfg.policy, action_dim=self.task.action_dim, seed=seed,
+                              control_dt=self.task.cfg.control_dt, actor=actor)
 
     def model(self):
         """A fresh posterior model q(theta | x) for this task and summarizer."""

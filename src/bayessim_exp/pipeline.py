@@ -56,7 +56,7 @@ class Pipeline:
     # the stages the pipeline owns ------------------------------------------------------
     def real(self, ctx: RoundContext) -> dict:
         """New real trajectories under the collect policy, appended to the earlier rounds' (kept raw)."""
-        traj = self.comp.real.collect(ctx.round, self.comp.policy(ctx.seed), self.rc.collect.horizon, ctx.seed)
+        traj = self.comp.real.collect(ctx.round, self.comp.policy(ctx.seed, ctx), self.rc.collect.horizon, ctx.seed)
         previous = Trajectories(**ctx.output("real", ctx.round - 1)["traj"]) if ctx.round > 1 else None
         if traj is None:
             if previous is None:

@@ -1,17 +1,24 @@
-"""Collect policies: batched `act(obs [N, S], t) -> actions [N, A]` in [-1, 1]."""
+"""Collect policies: batched `act(obs [N, S], t) -> actions [N, A]` in [-1, 1].
+
+Every factory is called as `factory(cfg, action_dim=, seed=, control_dt=, actor=)`; `actor` is the RL
+component's latest trained actor (None before the first train_policy stage, or with rl=none). A policy
+of your own is a factory registered the same way (README: "Your own components").
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 
+import numpy as np
 import torch
 
+from .errors import ConfigError
 from .registry import register
 
+log = logging.getLogger(__name__)
 
-@dataclasses.dataclass
-class RandomPolicyConfig:
-    pass
+SIGNALS = ("constant", "sine", "chirp")
 
 
 class RandomPolicy:
@@ -31,8 +38,13 @@ class RandomPolicy:
         return torch.stack([self.act(dummy, t) for t in range(horizon)], 1)
 
 
+@dataclasses.dataclass
+class RandomPolicyConfig:
+    pass
+
+
 @register("policy", "random", RandomPolicyConfig)
-def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int) -> RandomPolicy:
+def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int, **_: object) -> RandomPolicy:
     return RandomPolicy(action_dim, seed)
 
 
@@ -45,3 +57,106 @@ class OpenLoopPolicy:
 
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         return self.actions[:, t].to(obs.device)
+
+
+@dataclasses.dataclass
+class FixedPolicyConfig:
+    """An open-loop signal per action dimension; each list has one entry (all dimensions) or action_dim."""
+
+    signal: str  # constant | sine | chirp
+    offset: list[float]
+    amplitude: list[float]
+    frequency: list[float]  # Hz; a chirp's frequency at t = 0
+    frequency_end: list[float]  # Hz; a chirp's frequency after sweep_seconds, when it starts again
+    sweep_seconds: float
+    phase: list[float]  # rad
+
+    def validate(self) -> None:
+        if self.signal not in SIGNALS:
+            raise ConfigError(f"signal={self.signal!r} not allowed; allowed: {', '.join(SIGNALS)}")
+        if self.sweep_seconds <= 0:
+            raise ConfigError("sweep_seconds must be > 0")
+
+
+class FixedPolicy:
+    """offset + amplitude * sin(phase(t)): phase 0 for constant, 2 pi f t for sine, a linear sweep for chirp."""
+
+    def __init__(self, cfg: FixedPolicyConfig, action_dim: int, control_dt: float):
+        def per_dim(name: str) -> torch.Tensor:
+            values = torch.tensor(getattr(cfg, name), dtype=torch.float64)
+            if len(values) not in (1, action_dim):
+                raise ConfigError(f"policy.{name} needs 1 or {action_dim} (action_dim) values, got {len(values)}")
+            return values.expand(action_dim)
+
+        self.signal, self.dt, self.sweep = cfg.signal, control_dt, cfg.sweep_seconds
+        self.offset, self.amplitude, self.phase = per_dim("offset"), per_dim("amplitude"), per_dim("phase")
+        self.f0, self.f1 = per_dim("frequency"), per_dim("frequency_end")
+
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        seconds = t * self.dt
+        if self.signal == "constant":
+            angle = torch.full_like(self.phase, np.pi / 2)
+        elif self.signal == "sine":
+            angle = 2 * np.pi * self.f0 * seconds + self.phase
+        else:
+            s = seconds % self.sweep
+            angle = 2 * np.pi * (self.f0 * s + (self.f1 - self.f0) * s**2 / (2 * self.sweep)) + self.phase
+        action = (self.offset + self.amplitude * torch.sin(angle)).clamp(-1.0, 1.0).float()
+        return action.expand(obs.shape[0], -1)
+
+
+@register("policy", "fixed", FixedPolicyConfig)
+def fixed_policy(cfg: FixedPolicyConfig, action_dim: int, control_dt: float, **_: object) -> FixedPolicy:
+    return FixedPolicy(cfg, action_dim, control_dt)
+
+
+class ActorPolicy:
+    """A trained torchrl actor's mean action; with probability `random_share` a slot's action is uniform instead."""
+
+    def __init__(self, actor, action_dim: int, seed: int, random_share: float):
+        self.actor, self.random_share = actor, random_share
+        self.random = RandomPolicy(action_dim, seed)
+
+    @torch.no_grad()
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        from tensordict import TensorDict  # torchrl loads only where an actor is used
+        from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+        with set_exploration_type(ExplorationType.DETERMINISTIC):
+            td = self.actor(TensorDict({"observation": obs.float()}, batch_size=obs.shape[:1]))
+        action = td["action"].clamp(-1.0, 1.0)
+        if self.random_share > 0:
+            explore = torch.rand(obs.shape[0], generator=self.random.generator) < self.random_share
+            action = torch.where(explore[:, None], self.random.act(obs, t).to(action), action)
+        return action
+
+
+def actor_policy(actor, action_dim: int, seed: int, random_share: float, name: str):
+    if actor is None:
+        log.info("policy=%s: no trained actor yet (first round, or rl=none): uniform random actions", name)
+        return RandomPolicy(action_dim, seed)
+    return ActorPolicy(actor, action_dim, seed, random_share)
+
+
+@dataclasses.dataclass
+class RLPolicyConfig:
+    pass
+
+
+@register("policy", "rl", RLPolicyConfig)
+def rl_policy(cfg: RLPolicyConfig, action_dim: int, seed: int, actor=None, **_: object):
+    return actor_policy(actor, action_dim, seed, 0.0, "rl")
+
+
+@dataclasses.dataclass
+class RandomizedRLPolicyConfig:
+    random_share: float  # probability that a slot takes a uniform random action at a step
+
+    def validate(self) -> None:
+        if not 0.0 <= self.random_share <= 1.0:
+            raise ConfigError(f"random_share must lie in [0, 1], got {self.random_share}")
+
+
+@register("policy", "rl_randomized", RandomizedRLPolicyConfig)
+def rl_randomized_policy(cfg: RandomizedRLPolicyConfig, action_dim: int, seed: int, actor=None, **_: object):
+    return actor_policy(actor, action_dim, seed, cfg.random_share, "rl_randomized")

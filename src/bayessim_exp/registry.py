@@ -55,6 +55,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.sim.mjx",
     "bayessim_exp.sim.auto",
     "bayessim_exp.rl.none",
+    "bayessim_exp.rl.config",
 )
 
 

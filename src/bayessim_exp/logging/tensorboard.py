@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,16 @@ class TensorBoardLogger:
         fig = pair_plot(samples, plot_names, np.asarray(low)[idx], np.asarray(high)[idx], None if true is None else true[idx],
                         f"posterior, round {round_index}", prior_samples)
         self.writer.add_figure("posterior", fig, round_index)
+        self.writer.flush()
+
+    def gif(self, tag: str, gif_bytes: bytes, step: int) -> None:
+        """An animated GIF as an image summary (TensorBoard's IMAGES tab plays it), without moviepy."""
+        from PIL import Image
+        from tensorboard.compat.proto.summary_pb2 import Summary
+
+        width, height = Image.open(io.BytesIO(gif_bytes)).size
+        image = Summary.Image(height=height, width=width, colorspace=3, encoded_image_string=gif_bytes)
+        self.writer._get_file_writer().add_summary(Summary(value=[Summary.Value(tag=tag, image=image)]), step)
         self.writer.flush()
 
     def replays(self, round_index: int, check, obs_names: list[str], max_trajectories: int = 3) -> None:

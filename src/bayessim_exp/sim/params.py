@@ -120,6 +120,12 @@ class ParamSpec:
     def dim(self) -> int:
         return len(self.params)
 
+    @property
+    def nominal(self) -> np.ndarray:
+        """Nominal values [D]: the MJCF as written for scaling (`nominal`) and additive (0) parameters;
+        the YAML's `nominal` for set parameters."""
+        return np.array([0.0 if p.operation == "additive" else p.nominal for p in self.params])
+
     @classmethod
     def from_config(cls, parameters: dict[str, Any], model: mujoco.MjModel) -> ParamSpec:
         params = []

@@ -112,7 +112,7 @@ class BayesSim(InferenceMethod):
     def collect(self, ctx: RoundContext) -> dict:
         rc = self.comp.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
-        traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed), rc.collect.horizon, ctx.seed,
+        traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), rc.collect.horizon, ctx.seed,
                                       rc.logging.progress)
         return {"theta": theta.float(), "traj": traj.state_dict()}
 
@@ -201,7 +201,7 @@ class BayesSim(InferenceMethod):
             return None
 
         def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
-            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed), self.comp.rc.collect.horizon,
+            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), self.comp.rc.collect.horizon,
                                           ctx.seed).to(self.comp.device)
             x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
             return x[torch.isfinite(x).all(1)]

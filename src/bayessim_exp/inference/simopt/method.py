@@ -49,7 +49,7 @@ class SimOpt(InferenceMethod):
     def search(self, ctx: RoundContext) -> dict:
         real = real_trajectories(ctx)
         discrepancy = Discrepancy(self.cfg.discrepancy, self.comp.task.obs_names, real.states)
-        policy = self.comp.policy(ctx.seed)
+        policy = self.comp.policy(ctx.seed, ctx)
         seeds = iter(np.random.SeedSequence(ctx.seed).generate_state(self.cfg.updates).tolist())
 
         def cost(theta: torch.Tensor) -> torch.Tensor:

@@ -11,8 +11,8 @@ install:  ## torch 2.13.0 (CPU wheel) first, then the package with its dev extra
 	$(PIP) install -q torch==2.13.0
 	$(PIP) install -q -e ".[dev]"
 
-lint:  ## ruff over sources, tests and benchmarks (rules in pyproject.toml)
-	$(PYTHON) -m ruff check src tests benchmarks
+lint:  ## ruff over sources, tests, benchmarks and scripts (rules in pyproject.toml)
+	$(PYTHON) -m ruff check src tests benchmarks scripts
 
 test:  ## the whole test suite, as CI runs it (skip reasons printed)
 	$(PYTHON) -m pytest -q -rs -n 2 --max-worker-restart=0 tests

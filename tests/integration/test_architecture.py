@@ -6,6 +6,7 @@ import textwrap
 
 import pytest
 from omegaconf import OmegaConf, open_dict
+from run_results import without_seconds
 
 from bayessim_exp.pipeline import Pipeline
 
@@ -111,12 +112,6 @@ def test_untruncated_gaussian_prior_runs(compose, tmp_path):
     assert all(v > 0 for v in results["rounds"][-1]["posterior_std"].values())
 
 
-def _without_timings(value):
-    if isinstance(value, dict):
-        return {k: _without_timings(v) for k, v in value.items() if k != "seconds"}
-    if isinstance(value, list):
-        return [_without_timings(v) for v in value]
-    return value
 
 
 def test_same_seed_gives_the_same_results(compose, tmp_path):
@@ -124,4 +119,4 @@ def test_same_seed_gives_the_same_results(compose, tmp_path):
     for run in ("a", "b"):
         Pipeline(cfg, tmp_path / run).run()
     a, b = (json.loads((tmp_path / run / "results.json").read_text()) for run in ("a", "b"))
-    assert _without_timings(a) == _without_timings(b)
+    assert without_seconds(a) == without_seconds(b)

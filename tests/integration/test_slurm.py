@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from run_results import without_seconds
 
 pytestmark = pytest.mark.slow
 
@@ -35,12 +36,6 @@ def slurm():
         subprocess.run(["bash", str(SCRIPT), "stop"], capture_output=True, timeout=60)
 
 
-def without_seconds(obj):
-    if isinstance(obj, dict):
-        return {k: without_seconds(v) for k, v in obj.items() if k != "seconds"}
-    if isinstance(obj, list):
-        return [without_seconds(v) for v in obj]
-    return obj
 
 
 def wait_for(condition, what, proc, timeout=300):

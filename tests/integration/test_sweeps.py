@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from run_results import without_seconds
 
 from bayessim_exp.report.build import build_report
 
@@ -25,13 +26,6 @@ def cli(*args, cwd, timeout=600):
                           text=True, timeout=timeout)
 
 
-def without_seconds(obj):
-    """results.json with every wall-time field dropped (all that may differ between two equal runs)."""
-    if isinstance(obj, dict):
-        return {k: without_seconds(v) for k, v in obj.items() if k != "seconds"}
-    if isinstance(obj, list):
-        return [without_seconds(v) for v in obj]
-    return obj
 
 
 def test_a_multirun_sweep_and_its_report(tmp_path):

@@ -10,8 +10,6 @@ what is there. results.json is rewritten after every round.
 
 from __future__ import annotations
 
-import logging
-import time
 from pathlib import Path
 from typing import Any
 
@@ -25,9 +23,7 @@ from .diagnostics.scoring import score
 from .errors import ConfigError
 from .run_config import check_run_config
 from .sim.trajectories import Trajectories
-from .stages import RoundContext, Stage, check_stages
-
-log = logging.getLogger(__name__)
+from .stages import RoundContext, Stage, check_stages, run_stage
 
 
 class Pipeline:
@@ -95,18 +91,10 @@ class Pipeline:
             ctx = RoundContext(self.comp, self.run_dir, r, self.rc.seed, self.tb)
             seconds = {}
             for stage in self.stages:
-                ctx.stage = stage.name
-                if self.run_dir.has(r, stage.name):
-                    continue
-                t0 = time.perf_counter()
-                out = stage.run(ctx)
-                out["seconds"] = time.perf_counter() - t0
-                self.run_dir.save(r, stage.name, out)
-                ctx.remember(stage.name, out)
-                log.info("round %d: %s done in %.1f s", r, stage.name, out["seconds"])
-                self._drop_transient(r)
-                if stop_after == (r, stage.name):
-                    return results
+                if run_stage(ctx, stage):
+                    self._drop_consumed(ctx, stage)
+                    if stop_after == (r, stage.name):
+                        return results
             for stage in self.stages:
                 if self.run_dir.has(r, stage.name):
                     seconds[stage.name] = round(float(ctx.output(stage.name)["seconds"]), 3)
@@ -118,17 +106,13 @@ class Pipeline:
             self._tb.close()
         return results
 
-    def _drop_transient(self, r: int) -> None:
-        """A transient artifact read by every stage that needs it shrinks to its timing."""
+    def _drop_consumed(self, ctx: RoundContext, finished: Stage) -> None:
+        """A transient artifact shrinks to its timing once the last stage that reads it has finished."""
         for stage in self.stages:
-            if stage.transient and self._read_by_all(stage, r):
-                out = self.run_dir.load(r, stage.name)
-                if set(out) != {"seconds"}:
-                    self.run_dir.save(r, stage.name, {"seconds": out["seconds"]})
-
-    def _read_by_all(self, stage: Stage, r: int) -> bool:
-        readers = [s for s in self.stages if stage.name in s.inputs]
-        return bool(readers) and all(self.run_dir.has(r, s.name) for s in readers)
+            if stage.transient and stage.name in finished.inputs:
+                readers = [s for s in self.stages if stage.name in s.inputs]
+                if all(self.run_dir.has(ctx.round, s.name) for s in readers):
+                    self.run_dir.save(ctx.round, stage.name, {"seconds": ctx.output(stage.name)["seconds"]})
 
     def _record(self, ctx: RoundContext, seconds: dict) -> dict:
         ctx.stage = "record"

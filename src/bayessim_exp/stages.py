@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import logging
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +20,8 @@ import numpy as np
 if TYPE_CHECKING:
     from .artifacts import RunDir
     from .components import Components
+
+log = logging.getLogger(__name__)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,6 +37,21 @@ def stage_seed(seed: int, round_index: int, stage: str) -> int:
     """Independent, reproducible sub-seed per (seed, round, stage name)."""
     name = int.from_bytes(hashlib.sha256(stage.encode()).digest()[:4], "little")
     return int(np.random.SeedSequence([seed, round_index, name]).generate_state(1)[0])
+
+
+def run_stage(ctx: RoundContext, stage: Stage) -> bool:
+    """Run `stage` of ctx's round unless its artifact exists; save the artifact, with the stage's wall
+    seconds, before returning. Returns whether it ran."""
+    ctx.stage = stage.name
+    if ctx.has(stage.name):
+        return False
+    t0 = time.perf_counter()
+    out = stage.run(ctx)
+    out["seconds"] = time.perf_counter() - t0
+    ctx.run_dir.save(ctx.round, stage.name, out)
+    ctx.remember(stage.name, out)
+    log.info("round %d: %s done in %.1f s", ctx.round, stage.name, out["seconds"])
+    return True
 
 
 def check_stages(stages: list[Stage]) -> None:

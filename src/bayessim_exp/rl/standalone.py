@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from ..artifacts import RunDir
-from ..stages import RoundContext
+from ..stages import RoundContext, run_stage
 
 
 class GivenDistribution:
@@ -42,9 +42,5 @@ class StandaloneRounds:
         """Run the RL component's stages of one round (those not already saved) and return its context."""
         ctx = self.context(round_index)
         for stage in self.comp.rl.stages():
-            ctx.stage = stage.name
-            if not ctx.has(stage.name):
-                out = stage.run(ctx)
-                self.run_dir.save(round_index, stage.name, out)
-                ctx.remember(stage.name, out)
+            run_stage(ctx, stage)
         return ctx

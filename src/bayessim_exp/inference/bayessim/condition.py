@@ -14,9 +14,9 @@ import torch
 
 from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
-from ...distributions.truncated_prior import TruncatedPrior
 from ...models.base import PosteriorModel
 from .combination import Dispersion, combine
+from .correction import needs_no_correction
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
@@ -41,7 +41,7 @@ def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components:
 def _probit_proposal(proposal, prior):
     """The proposal's density over u: none to correct for the prior or a truncation of it (constant
     ratio); a previous probit-space posterior's inner distribution."""
-    if proposal is None or proposal is prior or (isinstance(proposal, TruncatedPrior) and proposal.prior is prior):
+    if needs_no_correction(proposal, prior):
         return None
     if isinstance(proposal, ProbitPosterior):
         return proposal.inner

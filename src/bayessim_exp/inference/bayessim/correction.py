@@ -57,7 +57,7 @@ def _box(dist) -> tuple[torch.Tensor, torch.Tensor] | None:
     return dist.low.double(), dist.high.double()
 
 
-def _needs_no_correction(proposal, prior) -> bool:
+def needs_no_correction(proposal, prior) -> bool:
     """The prior itself, or the prior truncated to a high-density region (constant ratio there)."""
     return proposal is None or proposal is prior or (isinstance(proposal, TruncatedPrior) and proposal.prior is prior)
 
@@ -140,7 +140,7 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     proposals = list(proposal) if isinstance(proposal, (list, tuple)) else [proposal] * n
     if len(proposals) != n:
         raise ValueError(f"{len(proposals)} proposals for {n} real summaries")
-    corrected = [p for p in proposals if not _needs_no_correction(p, prior)]
+    corrected = [p for p in proposals if not needs_no_correction(p, prior)]
     for p in corrected:
         _check_covers(prior, p)
     if not 0.0 < temperature <= 1.0:

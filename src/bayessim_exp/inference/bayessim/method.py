@@ -181,9 +181,8 @@ class BayesSim(InferenceMethod):
         posterior, x_real, real = conditioned["posterior"], conditioned["x_real"], real_trajectories(ctx)
         check = None
         if d.replay_sims and self.comp.task.state_from_observation(real.states[:1, 0].double().numpy()) is not None:
-            prior = self.comp.prior
             check = replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real,
-                                   posterior, prior, num=d.replay_sims, seed=ctx.seed, alpha=d.mismatch_alpha,
+                                   posterior, self.comp.prior, num=d.replay_sims, seed=ctx.seed, alpha=d.mismatch_alpha,
                                    max_distance_ratio=d.mismatch_distance_ratio)
             ctx.tb.replays(ctx.round, check, list(self.comp.task.obs_names))
         elif d.replay_sims:

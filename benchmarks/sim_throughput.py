@@ -1,17 +1,19 @@
 """Simulation throughput of every task on both backends, with and without randomization, in one run.
 
     python benchmarks/sim_throughput.py [--tasks Pendulum,Humanoid] [--envs 8192,32768] [--horizon 100]
-        [--native-envs 8192] [--native-horizon 10] [--json out.json] [--compile-only]
+        [--native-envs 8192] [--native-horizon 10] [--baseline-envs 8192,131072] [--json out.json]
+        [--compile-only] [--overrides 'task.mjx_tuning={iterations:4,ls_iterations:8}']
 
 Env-steps/s counts control steps (each `frame_skip` physics steps; the physics rate is the product)
 over whole `rollout` calls: resets with per-env parameters (set_const on the host where the spec needs
 it), the open-loop random policy's actions, observations, rewards, divergence checks and the
 trajectories handed to torch. Rows per task:
   native      NativeSimulator on all CPU threads, randomized: the baseline in the same run
-  mjx-plain   plain MJX on the nominal model (vmap(mjx.step) in lax.scan, random controls, no task code)
+  mjx-plain   plain MJX on the nominal model with the task's mjx_tuning (vmap(mjx.step) in lax.scan,
+              random controls, no task code)
   mjx-fixed   MjxSimulator with randomize=False (one model for every slot)
   mjx         MjxSimulator with a parameter set per slot drawn from the prior's box
-"randomization overhead" = 1 - mjx / mjx-fixed at the same size. Each figure is the median of
+"randomization overhead" = 1 - mjx / mjx-fixed at the same size (sizes in --baseline-envs). Each figure is the median of
 `--reps` timed calls after a first call (compilation, or a persistent-cache load, included, reported
 as `first s`). `--compile-only` makes the first calls alone, to fill JAX's persistent cache
 (`--cache-dir`) from several processes at once before a timed run.
@@ -90,7 +92,7 @@ def plain_mjx(task, envs: int, horizon: int, reps: int) -> tuple[float, float | 
     import jax
     from mujoco import mjx
 
-    m = task.model
+    m = task.mjx_model  # with the task's MJX tuning, as MjxSimulator runs it
     mx = mjx.put_model(m)
     data = jax.vmap(lambda _: mjx.make_data(mx))(jax.numpy.arange(envs))
     lo, hi = jax.numpy.asarray(m.actuator_ctrlrange.T, jax.numpy.float32)
@@ -115,7 +117,9 @@ def main():
     ap.add_argument("--native-envs", type=int, default=8192)
     ap.add_argument("--native-horizon", type=int, default=10)
     ap.add_argument("--reps", type=int, default=3)
-    ap.add_argument("--baseline-envs", type=int, default=8192, help="size of the mjx-plain and mjx-fixed rows")
+    ap.add_argument("--baseline-envs", default="8192",
+                    help="sizes of the mjx-fixed rows (the first also of the mjx-plain row)")
+    ap.add_argument("--overrides", nargs="*", default=[], help="config overrides, e.g. 'task.mjx_tuning={iterations:4}'")
     ap.add_argument("--cache-dir", default=None, help="JAX's persistent compilation cache")
     ap.add_argument("--compile-only", action="store_true")
     ap.add_argument("--skip-native", action="store_true")
@@ -136,7 +140,7 @@ def main():
               flush=True)
 
     for name in args.tasks.split(","):
-        overrides = [f"task={name}"]
+        overrides = [f"task={name}", *args.overrides]
         task = registry.build("task", api.compose(overrides).task)
         task.name = name  # ShadowHand_more shares its class with ShadowHand
         try:
@@ -144,10 +148,11 @@ def main():
                 sim = NativeSimulator(task, args.native_envs, NativeConfig(nthread=0, max_abs_qvel=1.0e4))
                 record(task, "native", args.native_envs, args.native_horizon,
                        *simulator_rollouts(task, args.native_envs, args.native_horizon, sim, reps))
-            b = args.baseline_envs
-            record(task, "mjx-plain", b, args.horizon, *plain_mjx(task, b, args.horizon, reps))
-            record(task, "mjx-fixed", b, args.horizon,
-                   *simulator_rollouts(task, b, args.horizon, MjxSimulator(task, b, cfg, randomize=False), reps))
+            baselines = list(map(int, args.baseline_envs.split(",")))
+            record(task, "mjx-plain", baselines[0], args.horizon, *plain_mjx(task, baselines[0], args.horizon, reps))
+            for b in baselines:
+                record(task, "mjx-fixed", b, args.horizon,
+                       *simulator_rollouts(task, b, args.horizon, MjxSimulator(task, b, cfg, randomize=False), reps))
             for envs in map(int, args.envs.split(",")):
                 record(task, "mjx", envs, args.horizon,
                        *simulator_rollouts(task, envs, args.horizon, MjxSimulator(task, envs, cfg), reps))
@@ -172,9 +177,9 @@ def main():
         same = {x["backend"]: x for x in rows if x.get("task") == r["task"] and "error" not in x}
         native = same.get("native", {}).get("env_steps_per_s")
         vs = f"{r['env_steps_per_s'] / native:.1f}x" if native else ""
-        fixed = same.get("mjx-fixed")
-        overhead = (f"{1 - r['env_steps_per_s'] / fixed['env_steps_per_s']:+.1%}"
-                    if r["backend"] == "mjx" and fixed and r["envs"] == fixed["envs"] else "")
+        fixed = next((x for x in rows if x.get("task") == r["task"] and x.get("backend") == "mjx-fixed"
+                      and x["envs"] == r["envs"]), None)
+        overhead = f"{1 - r['env_steps_per_s'] / fixed['env_steps_per_s']:+.1%}" if r["backend"] == "mjx" and fixed else ""
         print(f"{r['task']:<16} {r['backend']:<10} {r['envs']:>8} {r['env_steps_per_s']:>14,.0f} {vs:>10} {overhead:>24}")
 
 

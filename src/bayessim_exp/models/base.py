@@ -11,6 +11,7 @@ import torch
 
 from ..distributions.mixture import GaussianMixture
 from ..errors import ConfigError, TrainingError
+from .adam_steps import adam_steps
 
 
 class PosteriorModel(Protocol):
@@ -130,7 +131,8 @@ def train_density(
     """Minimise mean nll(theta_batch, x_batch) with Adam and early stopping on a held-out split.
 
     Restores the parameters of the best validation epoch. Raises TrainingError naming `label`
-    and the step when the loss or a gradient becomes non-finite.
+    and the step when the loss or a gradient becomes non-finite. On a GPU the optimisation step is
+    replayed from a CUDA graph (models/adam_steps.py).
     """
     from tqdm.auto import tqdm
 
@@ -141,51 +143,25 @@ def train_density(
         raise TrainingError(f"{label}: {n} simulations are too few to train on")
     perm = torch.randperm(n, generator=g)
     val_idx, train_idx = perm[:n_val].to(theta.device), perm[n_val:]
-    params = [p for p in net.parameters() if p.requires_grad]
-    opt = torch.optim.Adam(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
+    steps = adam_steps(net, nll, theta, x, cfg, label)
     best, best_state, since_best = math.inf, None, 0
     history: dict[str, list[float]] = {"train": [], "val": []}
-    step = 0
     bar = tqdm(range(cfg.max_epochs), desc=f"fit {label}".strip(), leave=False, delay=2, disable=None)
     for epoch in bar:
         net.train()
         order = train_idx[torch.randperm(len(train_idx), generator=g)].to(theta.device)
-        # the first step with a non-finite loss or gradient, tracked on the device and read once per
-        # epoch: a read per step would stall a GPU at every batch
-        bad_loss_step = bad_grad_step = torch.tensor(-1, device=theta.device)
-        bad_loss = torch.tensor(0.0, device=theta.device)
-        total = torch.tensor(0.0, device=theta.device)
-        count = 0
-        for start in range(0, len(order), cfg.batch_size):
-            b = order[start : start + cfg.batch_size]
-            loss = nll(theta[b], x[b]).mean()
-            step += 1
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            first = (bad_loss_step < 0) & ~torch.isfinite(loss)
-            bad_loss_step = torch.where(first, step, bad_loss_step)
-            bad_loss = torch.where(first, loss.detach(), bad_loss)
-            grads = [p.grad for p in params if p.grad is not None]
-            grad_ok = torch.isfinite(torch.nn.utils.get_total_norm(grads)) | ~torch.isfinite(loss)
-            bad_grad_step = torch.where((bad_grad_step < 0) & ~grad_ok, step, bad_grad_step)
-            opt.step()
-            total += loss.detach() * len(b)
-            count += len(b)
-        if bad_loss_step >= 0:
-            raise TrainingError(f"{label}: loss became {bad_loss.item()} at epoch {epoch}, step {int(bad_loss_step)}")
-        if bad_grad_step >= 0:
-            raise TrainingError(f"{label}: non-finite gradient at epoch {epoch}, step {int(bad_grad_step)}")
-        total = total.item()
+        train_loss = steps.epoch(order)
+        steps.raise_if_not_finite(epoch)
         net.eval()
         with torch.no_grad():
             val = nll(theta[val_idx], x[val_idx]).mean().item()
         if not math.isfinite(val):
-            raise TrainingError(f"{label}: validation loss became {val} at epoch {epoch}, step {step}")
-        history["train"].append(total / count)
+            raise TrainingError(f"{label}: validation loss became {val} at epoch {epoch}, step {int(steps.step)}")
+        history["train"].append(train_loss)
         history["val"].append(val)
         if on_epoch is not None:
-            on_epoch(epoch, total / count, val)
-        bar.set_postfix(train=f"{total / count:.3f}", val=f"{val:.3f}")
+            on_epoch(epoch, train_loss, val)
+        bar.set_postfix(train=f"{train_loss:.3f}", val=f"{val:.3f}")
         if val < best - 1e-4:
             best, since_best = val, 0
             best_state = {k: v.detach().clone() for k, v in net.state_dict().items()}

@@ -9,8 +9,8 @@ run with xp=jax.numpy inside the compiled step. Arrays reach torch through DLPac
 
 Compilations: one step and one reset per simulator (the pool keeps one per batch size), one fused
 rollout per horizon; JAX's persistent compilation cache (`cache_dir`) keeps them across processes.
-A slot that breaks down is frozen at its last finite state, so it neither spreads NaNs nor keeps the
-solver iterating, and it stays flagged until its next reset.
+A slot that breaks down is frozen at its last finite state (the fields mjx.step reads), so it neither
+spreads NaNs nor keeps the solver iterating, and it stays flagged until its next reset.
 """
 
 from __future__ import annotations
@@ -38,6 +38,9 @@ from .trajectories import Trajectories  # noqa: E402
 _STATIC_FIELDS = frozenset({"geom_contype", "geom_conaffinity", "geom_condim", "geom_type", "geom_priority",
                             "opt.iterations", "opt.ls_iterations", "opt.solver", "opt.cone", "opt.integrator",
                             "opt.disableflags", "opt.enableflags", "opt.jacobian"})
+# the MjData fields mjx.step reads (MuJoCo's mjSTATE_INTEGRATION); every other field it derives from them
+_STEP_INPUTS = ("time", "qpos", "qvel", "act", "history", "qacc_warmstart", "plugin_state", "ctrl", "qfrc_applied",
+                "xfrc_applied", "eq_active", "mocap_pos", "mocap_quat", "userdata")
 _PROBES = 8  # random parameter sets (besides the bounds) that decide which derived constants vary
 
 
@@ -177,7 +180,10 @@ class MjxSimulator(Simulator):
         data = jax.lax.fori_loop(0, self.task.frame_skip, lambda _, d: step(mx, d), data)
         now_broken = broke_down(data.qpos, data.qvel, self.cfg.max_abs_qvel, xp=jnp)
         held = now_broken | broken
-        data = _where(jnp, held, before, data)  # frozen at the last finite state: never poisons the batch
+        # frozen at the last finite state, so it never poisons the batch; only what mjx.step reads is
+        # restored (the derived fields are recomputed from it), a fraction of the memory traffic
+        data = data.replace(**_where(jnp, held, {f: getattr(before, f) for f in _STEP_INPUTS},
+                                     {f: getattr(data, f) for f in _STEP_INPUTS}))
         new_obs = jnp.where(held[:, None], obs, jnp.asarray(self.task.observe(data, xp=jnp), jnp.float32))
         reward = jnp.asarray(self.task.reward(obs, actions, new_obs, xp=jnp), jnp.float32)
         terminated = jnp.asarray(self.task.terminated(new_obs, xp=jnp), bool)

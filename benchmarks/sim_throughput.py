@@ -126,7 +126,7 @@ def main():
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     jax = jax_setup(args.cache_dir)
-    cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0)
+    cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0, native_below=0)
     reps = 0 if args.compile_only else args.reps
     rows = []
 

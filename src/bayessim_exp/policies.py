@@ -122,11 +122,12 @@ class ActorPolicy:
         from tensordict import TensorDict  # torchrl loads only where an actor is used
         from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+        device = next(self.actor.parameters()).device  # the simulator's observations may live elsewhere
         with set_exploration_type(ExplorationType.DETERMINISTIC):
-            td = self.actor(TensorDict({"observation": obs.float()}, batch_size=obs.shape[:1]))
+            td = self.actor(TensorDict({"observation": obs.float().to(device)}, batch_size=obs.shape[:1], device=device))
         action = td["action"].clamp(-1.0, 1.0)
         if self.random_share > 0:
-            explore = torch.rand(obs.shape[0], generator=self.random.generator) < self.random_share
+            explore = (torch.rand(obs.shape[0], generator=self.random.generator) < self.random_share).to(device)
             action = torch.where(explore[:, None], self.random.act(obs, t).to(action), action)
         return action
 

@@ -1,5 +1,5 @@
-"""sim=mjx against sim=native: the same parameters, initial states and actions give the same
-trajectories (float32 MJX against float64 MuJoCo), the fused rollout equals the step-by-step one,
+"""sim=mjx against sim=native: the same model (the task's MJX tuning), parameters, initial states and
+actions give the same trajectories (float32 MJX against float64 MuJoCo), the fused rollout equals the step-by-step one,
 single slots reset with new parameters, and a diverging slot is flagged without touching the others.
 
 Tiny batches and few steps: MJX compiles for tens of seconds per model on a CPU."""
@@ -23,7 +23,7 @@ from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
 
 pytestmark = pytest.mark.slow
 NATIVE = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
-MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1)
+MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0)
 # horizon (control steps) and tolerance on every observation, per task: the contact task's
 # trajectories part faster (float32 contact solver against float64), so it is compared over fewer steps
 CASES = {"Pendulum": (20, 1e-3), "Cartpole": (20, 1e-3), "BallBalance": (5, 1e-2)}
@@ -39,7 +39,8 @@ def test_mjx_trajectories_match_native(compose, name):
     horizon, tol = CASES[name]
     task = registry.build("task", compose([f"task={name}"]).task)
     params = params_for(task, 3)
-    native = NativeSimulator(task, 3, NATIVE).rollout(params, RandomPolicy(task.action_dim, 1), horizon, seed=2)
+    native = NativeSimulator(task, 3, NATIVE, model=task.mjx_model).rollout(params, RandomPolicy(task.action_dim, 1),
+                                                                          horizon, seed=2)
     sim = MjxSimulator(task, 3, MJX)
     fused = sim.rollout(params, RandomPolicy(task.action_dim, 1), horizon, seed=2)
     assert not native.diverged.any() and not fused.diverged.any()

@@ -51,6 +51,8 @@ def broke_down(qpos: Any, qvel: Any, max_abs_qvel: float, xp: Any = np) -> Any:
 class Simulator(abc.ABC):
     """N slots of `task`; each slot takes new parameters and an initial state at its own reset."""
 
+    compiles_per_size = False  # each batch size costs a compilation (MJX): the pool pads batches to one size
+
     def __init__(self, task: Task, num_envs: int):
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")

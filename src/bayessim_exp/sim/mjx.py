@@ -31,6 +31,7 @@ from ..errors import ConfigError  # noqa: E402
 from ..registry import register  # noqa: E402
 from ..tasks.base import Task  # noqa: E402
 from .base import Policy, Simulator, broke_down  # noqa: E402
+from .native import NativeConfig, NativeSimulator  # noqa: E402
 from .params import ParamSpec  # noqa: E402
 from .trajectories import Trajectories  # noqa: E402
 
@@ -48,11 +49,12 @@ _PROBES = 8  # random parameter sets (besides the bounds) that decide which deri
 class MjxConfig:
     max_abs_qvel: float  # a joint speed beyond this counts as diverged
     cache_dir: Any  # JAX's persistent compilation cache (str), or None: off
-    nthread: int  # CPU threads of the host-side set_const (0: all)
+    nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: all)
+    native_below: int  # batches smaller than this run on native MuJoCo (the tuned model) on CPU threads
 
     def validate(self) -> None:
-        if self.max_abs_qvel <= 0 or self.nthread < 0:
-            raise ConfigError("max_abs_qvel must be > 0 and nthread >= 0")
+        if self.max_abs_qvel <= 0 or self.nthread < 0 or self.native_below < 0:
+            raise ConfigError("max_abs_qvel must be > 0, nthread and native_below >= 0")
 
 
 def jax_setup(cache_dir: str | None) -> Any:
@@ -82,6 +84,8 @@ def to_torch(x: Any) -> torch.Tensor:
 class MjxSimulator(Simulator):
     """`randomize=False` runs every slot on the nominal model and ignores the parameters: what per-slot
     parameters cost is measured against it (benchmarks/sim_throughput.py)."""
+
+    compiles_per_size = True
 
     def __init__(self, task: Task, num_envs: int, cfg: MjxConfig, randomize: bool = True):
         super().__init__(task, num_envs)
@@ -285,5 +289,14 @@ def _where(jnp: Any, mask: Any, a: Any, b: Any) -> Any:
 
 @register("sim", "mjx", MjxConfig)
 def mjx_backend(cfg: MjxConfig):
-    """The sim group builds a factory: (task, num_envs) -> simulator."""
-    return lambda task, num_envs: MjxSimulator(task, num_envs, cfg)
+    """The sim group builds a factory: (task, num_envs) -> simulator. A small batch (the real stage's few
+    trajectories, the model checks' replays) takes less time on CPU threads than compiling MJX for its
+    size would; it simulates the same tuned model there."""
+    native = NativeConfig(nthread=cfg.nthread, max_abs_qvel=cfg.max_abs_qvel)
+
+    def make(task: Task, num_envs: int) -> Simulator:
+        if num_envs < cfg.native_below:
+            return NativeSimulator(task, num_envs, native, model=task.mjx_model)
+        return MjxSimulator(task, num_envs, cfg)
+
+    return make

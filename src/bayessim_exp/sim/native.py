@@ -33,10 +33,13 @@ class NativeConfig:
 
 
 class NativeSimulator(Simulator):
-    def __init__(self, task: Task, num_envs: int, cfg: NativeConfig):
+    """`model`: what the slots simulate (default the task's model; sim=mjx passes its tuned model)."""
+
+    def __init__(self, task: Task, num_envs: int, cfg: NativeConfig, model: mujoco.MjModel | None = None):
         super().__init__(task, num_envs)
         self.cfg = cfg
-        self.batch = mjbatch.Batch(task.model, num_envs, nthread=cfg.nthread)
+        self.model = task.model if model is None else model
+        self.batch = mjbatch.Batch(self.model, num_envs, nthread=cfg.nthread)
         derived = [f for f in task.data_fields if f not in ("qpos", "qvel", "act", "time")]
         self._stage = mujoco.mjtStage.mjSTAGE_VEL if derived else mujoco.mjtStage.mjSTAGE_NONE
         for field in task.data_fields:  # outputs are copied out only after calls made once they are bound
@@ -55,7 +58,7 @@ class NativeSimulator(Simulator):
         return torch.device("cpu")
 
     def set_params(self, values: np.ndarray, ids: np.ndarray) -> None:
-        for name, vals in self.task.spec.field_values(self.task.model, values).items():
+        for name, vals in self.task.spec.field_values(self.model, values).items():
             target = self.batch.expand(name)
             target[ids] = vals.reshape((len(ids),) + target.shape[1:])
         if self.task.spec.needs_set_const:

@@ -1,7 +1,9 @@
 """Long-lived simulators of a run, one per batch size, and chunked rollouts over many parameter sets.
 
-A simulator is built once per size and reused by every stage and round (on MJX each new size is a
-compilation); a collect of 10,000 simulations in chunks of 4,096 builds two: 4,096 and 1,808.
+A simulator is built once per size and reused by every stage and round. A collect of 10,000
+simulations in chunks of 4,096 builds two, 4,096 and 1,808, where sizes cost nothing (native); where
+each size is a compilation (MJX), the last chunk runs in the 4,096-slot simulator, filled up with
+copies of its first row whose results are dropped.
 """
 
 from __future__ import annotations
@@ -38,5 +40,13 @@ class SimulatorPool:
         for k, start in enumerate(range(0, len(params), self.chunk)):
             block = params[start : start + self.chunk]
             part_state = None if state is None else {f: v[start : start + self.chunk] for f, v in state.items()}
-            parts.append(self.get(len(block)).rollout(block, policy, horizon, int(seeds[k]), progress, part_state))
-        return Trajectories.cat(parts)
+            n, full = len(block), self._sims.get(self.chunk)
+            if n < self.chunk and full is not None and full.compiles_per_size:
+                fill = lambda a: np.concatenate([a, np.repeat(a[:1], self.chunk - n, 0)])  # noqa: E731
+                part_state = None if part_state is None else {f: fill(np.asarray(v)) for f, v in part_state.items()}
+                traj = full.rollout(fill(block), policy, horizon, int(seeds[k]), progress, part_state)
+                parts.append(traj.select(slice(0, n)))
+            else:
+                parts.append(self.get(n).rollout(block, policy, horizon, int(seeds[k]), progress, part_state))
+        device = parts[0].states.device  # a small last chunk may have run on CPU threads (sim=mjx native_below)
+        return Trajectories.cat([part.to(device) for part in parts])

@@ -180,7 +180,7 @@ class BayesSim(InferenceMethod):
         d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
         posterior, x_real, real = conditioned["posterior"], conditioned["x_real"], real_trajectories(ctx)
         check = None
-        if d.replay_sims and self.comp.task.state_from_observation(real.states[:1, 0].double().numpy()) is not None:
+        if d.replay_sims and self.comp.task.state_from_observation(real.states[:1, 0].double().cpu().numpy()) is not None:
             check = replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real,
                                    posterior, self.comp.prior, num=d.replay_sims, seed=ctx.seed, alpha=d.mismatch_alpha,
                                    max_distance_ratio=d.mismatch_distance_ratio)

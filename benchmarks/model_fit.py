@@ -1,0 +1,71 @@
+"""Posterior-model training speed: the same fit on the CPU and on a GPU, eager and from a CUDA graph.
+
+    python benchmarks/model_fit.py [--models mdnn mdrff flow] [--sims 10000] [--epochs 20]
+        [--theta-dim 2] [--x-dim 6] [--batch-size 256]
+
+Synthetic pairs (x = A theta + noise) of the pipeline's default size; every fit runs exactly
+`--epochs` epochs (patience = epochs), so rows compare the same work. Rows per model: `cpu` (the
+baseline, the machine's torch threads), `cuda eager` (one kernel launch at a time) and `cuda graph`
+(the step replayed from a CUDA graph, what the pipeline does with device=cuda).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import torch
+
+from bayessim_exp.models import adam_steps, base
+from bayessim_exp.registry import build
+
+
+def pairs(n: int, theta_dim: int, x_dim: int) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(0)
+    theta = torch.rand(n, theta_dim, generator=g)
+    a = torch.randn(theta_dim, x_dim, generator=g)
+    return theta, theta @ a + 0.1 * torch.randn(n, x_dim, generator=g)
+
+
+def timed_fit(name: str, cfg: dict, theta: torch.Tensor, x: torch.Tensor, device: str, graphed: bool) -> float:
+    # the eager row swaps the step factory: the same fit with one launch per kernel
+    base.adam_steps = adam_steps.adam_steps if graphed else adam_steps.EagerAdamSteps
+    model = build("model", {"name": name, **cfg}, theta_dim=theta.shape[1], x_dim=x.shape[1])
+    theta, x = theta.to(device), x.to(device)
+    if device == "cuda":
+        torch.cuda.synchronize()
+    start = time.perf_counter()
+    model.fit(theta, x, seed=0, label=name)
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--models", nargs="+", default=["mdnn", "mdrff", "flow"])
+    ap.add_argument("--sims", type=int, default=10000)
+    ap.add_argument("--epochs", type=int, default=20)
+    ap.add_argument("--theta-dim", type=int, default=2)
+    ap.add_argument("--x-dim", type=int, default=6)
+    ap.add_argument("--batch-size", type=int, default=256)
+    args = ap.parse_args()
+    theta, x = pairs(args.sims, args.theta_dim, args.x_dim)
+    cfg = {"max_epochs": args.epochs, "patience": args.epochs, "batch_size": args.batch_size}
+    variants = [("cpu", "cpu", False)]
+    if torch.cuda.is_available():
+        variants += [("cuda eager", "cuda", False), ("cuda graph", "cuda", True)]
+    for _, device, graphed in variants:  # one-time costs (imports, CUDA context, kernel loading) before timing
+        timed_fit(args.models[0], {**cfg, "max_epochs": 1}, theta[:1000], x[:1000], device, graphed)
+    print(f"{args.sims} pairs, theta {args.theta_dim}-D, x {args.x_dim}-D, batch {args.batch_size}, "
+          f"{args.epochs} epochs; torch {torch.__version__}, {torch.get_num_threads()} CPU threads"
+          + (f", {torch.cuda.get_device_name()}" if torch.cuda.is_available() else ""))
+    print(f"{'model':<8} {'where':<12} {'s per epoch':>12} {'vs cpu':>8}")
+    for name in args.models:
+        baseline = None
+        for label, device, graphed in variants:
+            per_epoch = timed_fit(name, cfg, theta, x, device, graphed) / args.epochs
+            baseline = baseline or per_epoch
+            print(f"{name:<8} {label:<12} {per_epoch:>12.4f} {baseline / per_epoch:>7.1f}x", flush=True)
+
+
+if __name__ == "__main__":
+    main()

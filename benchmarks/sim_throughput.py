@@ -2,7 +2,7 @@
 
     python benchmarks/sim_throughput.py [--tasks Pendulum,Humanoid] [--envs 8192,32768] [--horizon 100]
         [--native-envs 8192] [--native-horizon 10] [--baseline-envs 8192,131072] [--json out.json]
-        [--compile-only] [--overrides 'task.mjx_tuning={iterations:4,ls_iterations:8}']
+        [--compile-only] [--rows mjx-plain,mjx] [--overrides '++task.mjx_tuning.max_geom_pairs=8']
 
 Env-steps/s counts control steps (each `frame_skip` physics steps; the physics rate is the product)
 over whole `rollout` calls: resets with per-env parameters (set_const on the host where the spec needs
@@ -122,12 +122,14 @@ def main():
     ap.add_argument("--overrides", nargs="*", default=[], help="config overrides, e.g. 'task.mjx_tuning={iterations:4}'")
     ap.add_argument("--cache-dir", default=None, help="JAX's persistent compilation cache")
     ap.add_argument("--compile-only", action="store_true")
-    ap.add_argument("--skip-native", action="store_true")
+    ap.add_argument("--rows", default="native,mjx-plain,mjx-fixed,mjx",
+                    help="which rows (compilation phases split them across processes)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     jax = jax_setup(args.cache_dir)
     cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0, native_below=0)
     reps = 0 if args.compile_only else args.reps
+    rows_wanted = set(args.rows.split(","))
     rows = []
 
     def record(task, backend, envs, horizon, first, median):
@@ -144,16 +146,17 @@ def main():
         task = registry.build("task", api.compose(overrides).task)
         task.name = name  # ShadowHand_more shares its class with ShadowHand
         try:
-            if not args.skip_native and not args.compile_only:
+            if "native" in rows_wanted and not args.compile_only:
                 sim = NativeSimulator(task, args.native_envs, NativeConfig(nthread=0, max_abs_qvel=1.0e4))
                 record(task, "native", args.native_envs, args.native_horizon,
                        *simulator_rollouts(task, args.native_envs, args.native_horizon, sim, reps))
             baselines = list(map(int, args.baseline_envs.split(",")))
-            record(task, "mjx-plain", baselines[0], args.horizon, *plain_mjx(task, baselines[0], args.horizon, reps))
-            for b in baselines:
+            if "mjx-plain" in rows_wanted:
+                record(task, "mjx-plain", baselines[0], args.horizon, *plain_mjx(task, baselines[0], args.horizon, reps))
+            for b in baselines if "mjx-fixed" in rows_wanted else []:
                 record(task, "mjx-fixed", b, args.horizon,
                        *simulator_rollouts(task, b, args.horizon, MjxSimulator(task, b, cfg, randomize=False), reps))
-            for envs in map(int, args.envs.split(",")):
+            for envs in map(int, args.envs.split(",")) if "mjx" in rows_wanted else []:
                 record(task, "mjx", envs, args.horizon,
                        *simulator_rollouts(task, envs, args.horizon, MjxSimulator(task, envs, cfg), reps))
         except Exception as exc:  # one task's failure must not hide the others' figures

@@ -42,11 +42,16 @@ class SimulatorPool:
             part_state = None if state is None else {f: v[start : start + self.chunk] for f, v in state.items()}
             n, full = len(block), self._sims.get(self.chunk)
             if n < self.chunk and full is not None and full.compiles_per_size:
-                fill = lambda a: np.concatenate([a, np.repeat(a[:1], self.chunk - n, 0)])  # noqa: E731
-                part_state = None if part_state is None else {f: fill(np.asarray(v)) for f, v in part_state.items()}
-                traj = full.rollout(fill(block), policy, horizon, int(seeds[k]), progress, part_state)
+                pad = self.chunk - n
+                part_state = None if part_state is None else {f: _fill(np.asarray(v), pad) for f, v in part_state.items()}
+                traj = full.rollout(_fill(block, pad), policy, horizon, int(seeds[k]), progress, part_state)
                 parts.append(traj.select(slice(0, n)))
             else:
                 parts.append(self.get(n).rollout(block, policy, horizon, int(seeds[k]), progress, part_state))
         device = parts[0].states.device  # a small last chunk may have run on CPU threads (sim=mjx native_below)
         return Trajectories.cat([part.to(device) for part in parts])
+
+
+def _fill(rows: np.ndarray, pad: int) -> np.ndarray:
+    """rows followed by `pad` copies of the first row."""
+    return np.concatenate([rows, np.repeat(rows[:1], pad, 0)])

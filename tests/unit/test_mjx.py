@@ -25,8 +25,10 @@ pytestmark = pytest.mark.slow
 NATIVE = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
 MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0)
 # horizon (control steps) and tolerance on every observation, per task: the contact task's
-# trajectories part faster (float32 contact solver against float64), so it is compared over fewer steps
-CASES = {"Pendulum": (20, 1e-3), "Cartpole": (20, 1e-3), "BallBalance": (5, 1e-2)}
+# trajectories part faster (float32 contact solver against float64), so it is compared over fewer steps;
+# Cartpole's MJX tuning stops the solver after 4 iterations, where MJX and MuJoCo are not at the same
+# point of the friction-loss rows yet (measured 1.8e-3; 1e-3 held with the stock 100 iterations)
+CASES = {"Pendulum": (20, 1e-3), "Cartpole": (20, 3e-3), "BallBalance": (5, 1e-2)}
 
 
 def params_for(task, n, seed=0):
@@ -80,3 +82,11 @@ def test_diverging_slot_is_flagged_and_kept_apart():
     assert torch.isfinite(traj.states).all()
     native = NativeSimulator(task, 4, NATIVE).rollout(params, RandomPolicy(1, 0), 100, seed=0)
     np.testing.assert_allclose(traj.states[[0, 2]].cpu().numpy(), native.states[[0, 2]].numpy(), atol=1e-3)
+
+
+def test_small_batches_run_on_native_mujoco_with_the_tuned_model(compose):
+    task = registry.build("task", compose(["task=Cartpole"]).task)
+    make = registry.build("sim", {"name": "mjx", "native_below": 16, "cache_dir": None})
+    small, large = make(task, 4), make(task, 16)
+    assert isinstance(small, NativeSimulator) and small.model.opt.iterations == task.mjx_model.opt.iterations != 100
+    assert isinstance(large, MjxSimulator)

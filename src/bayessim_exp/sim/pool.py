@@ -48,8 +48,7 @@ class SimulatorPool:
                 parts.append(traj.select(slice(0, n)))
             else:
                 parts.append(self.get(n).rollout(block, policy, horizon, int(seeds[k]), progress, part_state))
-        device = parts[0].states.device  # a small last chunk may have run on CPU threads (sim=mjx native_below)
-        return Trajectories.cat([part.to(device) for part in parts])
+        return Trajectories.cat(parts)
 
 
 def _fill(rows: np.ndarray, pad: int) -> np.ndarray:

@@ -2,9 +2,10 @@
 
 A density network's step is a few hundred small kernels; launching them one by one from Python
 leaves a GPU idle most of the time (on the lent H100 machine an eager GPU epoch was slower than the
-CPU's). Captured once into a CUDA graph, a whole epoch is one launch. The graph reads its rows
-through a fixed index buffer, so every batch has the same size: the last batch of an epoch is filled
-up with rows from the epoch's start.
+CPU's). Captured once into a CUDA graph, a step is one launch (a whole epoch in one graph measured
+slower: a graph's launch cost grows with its nodes).
+The graphed step reads its rows through a fixed index buffer, so every batch has the same size: the
+last batch of an epoch is filled up with rows from the epoch's start.
 
 Both keep the first non-finite loss or gradient on the device, read once per epoch: a read per step
 would stall a GPU at every batch.
@@ -20,6 +21,9 @@ import torch
 from ..errors import TrainingError
 
 log = logging.getLogger(__name__)
+
+_WARMUP_STEPS = 3  # eager steps on a side stream before capture (CUDA graphs need warmed-up allocations)
+
 
 class EagerAdamSteps:
     def __init__(self, net: torch.nn.Module, nll: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
@@ -73,59 +77,54 @@ class EagerAdamSteps:
 
 
 class GraphedAdamSteps(EagerAdamSteps):
-    """The first epoch runs eagerly on a side stream (CUDA graphs need warmed-up allocations), the
-    second is captured whole into one graph, and every later epoch replays it: one launch per epoch.
+    """The first steps run eagerly on a side stream, the next one is captured; all later ones replay it.
     A network whose step cannot be captured (an operation that reads back to the host) goes on eagerly."""
 
     def __init__(self, net, nll, theta, x, cfg, label):
         super().__init__(net, nll, theta, x, cfg, label, capturable=True)
         self.batch_size = min(cfg.batch_size, len(theta))
-        self.rows: torch.Tensor | None = None  # [steps, batch]: the row indices the graph reads
+        self.rows = torch.zeros(self.batch_size, dtype=torch.long, device=theta.device)
         self.graph: torch.cuda.CUDAGraph | None = None
-        self.warmed_up = self.capture_failed = False
+        self.eager_steps = 0
+        self.capture_failed = False
 
     def _batches(self, order: torch.Tensor) -> list[torch.Tensor]:
         short = -len(order) % self.batch_size
         return list(torch.cat([order, order[:short]]).split(self.batch_size))
 
-    def epoch(self, order: torch.Tensor) -> float:
-        batches = torch.stack(self._batches(order))
-        self.total.zero_()
+    def _run(self, rows: torch.Tensor) -> None:
+        self.rows.copy_(rows)
         if self.graph is not None:
-            self.rows.copy_(batches)
             self.graph.replay()
-        elif not self.warmed_up:
+        elif self.capture_failed:
+            super()._run(self.rows)
+        elif self.eager_steps < _WARMUP_STEPS:
             side = torch.cuda.Stream()
             side.wait_stream(torch.cuda.current_stream())
             with torch.cuda.stream(side):
-                for rows in batches:
-                    self._run(rows)
+                super()._run(self.rows)
             torch.cuda.current_stream().wait_stream(side)
-            self.warmed_up = True
-        elif not self.capture_failed and self._capture(batches):
-            self.graph.replay()
+            self.eager_steps += 1
         else:
-            for rows in batches:
-                self._run(rows)
-        return self.total.item() / batches.numel()
+            self._capture()
+            if self.graph is not None:
+                self.graph.replay()
+            else:
+                super()._run(self.rows)
 
-    def _capture(self, batches: torch.Tensor) -> bool:
-        self.rows = batches.clone()
-        self.opt.zero_grad(set_to_none=True)  # the first captured backward writes the gradients, the later ones add
+    def _capture(self) -> None:
+        self.opt.zero_grad(set_to_none=True)
         graph = torch.cuda.CUDAGraph()
         try:
-            with torch.cuda.graph(graph):
-                for k, rows in enumerate(self.rows):
-                    if k:
-                        self.opt.zero_grad(set_to_none=False)
-                    self._step(rows)
+            # thread_local: JAX's threads may call CUDA meanwhile; only this thread's calls must be capturable
+            with torch.cuda.graph(graph, capture_error_mode="thread_local"):
+                self._step(self.rows)
         except RuntimeError as exc:
             log.info("%s: the training step cannot be captured in a CUDA graph (%s); training eagerly",
                      self.label, str(exc).splitlines()[0])
             self.capture_failed = True
-            return False
+            return
         self.graph = graph
-        return True
 
 
 def adam_steps(net, nll, theta, x, cfg, label) -> EagerAdamSteps:

@@ -54,22 +54,21 @@ def test_defaults_are_written_once_in_the_yaml(compose, group, name):
 
 
 # each task's inference defaults (its YAML's defaults list; measured in docs/tasks.md)
-TASK_DEFAULTS = {
-    "Pendulum": ("start", "mdnn", "full", False),
-    "Cartpole": ("corrdiff", "mdnn", "diagonal", True),
-    "Ant": ("corrdiff", "mdnn", "diagonal", True),
-    "Humanoid": ("corrdiff", "mdnn", "diagonal", True),
-    "ShadowHand": ("corrdiff", "mdnn", "diagonal", True),
-    "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True),
+TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, ensemble
+    "Pendulum": ("start", "mdnn", "full", False, 1),
+    "Cartpole": ("corrdiff", "mdnn", "diagonal", True, 1),
+    "Ant": ("corrdiff", "mdnn", "diagonal", True, 1),
+    "Humanoid": ("corrdiff", "mdnn", "diagonal", True, 1),
+    "ShadowHand": ("corrdiff", "mdnn", "diagonal", True, 3),
+    "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True, 3),
 }
 
 
 @pytest.mark.parametrize("task", sorted(TASK_DEFAULTS))
 def test_a_task_chooses_its_inference_defaults(compose, task):
     cfg = compose([f"task={task}"])
-    summarizer, model, covariance, project_inputs = TASK_DEFAULTS[task]
-    assert (cfg.summarizer.name, cfg.model.name, cfg.model.covariance, cfg.model.project_inputs) == (
-        summarizer, model, covariance, project_inputs)
+    m = cfg.model
+    assert (cfg.summarizer.name, m.name, m.covariance, m.project_inputs, m.ensemble) == TASK_DEFAULTS[task]
     assert cfg.method.parameter_space == "probit"
 
 

@@ -17,8 +17,9 @@ conditions one real trajectory, and the table gives
 - the guard's verdict (diagnostics/guard.py).
 
 A model spec is `name[:space][:key=value,key=value]`: name a conf/model YAML (its values, composed as
-`model=name` would be, are the defaults), space `box` (fitted in parameter units, posterior truncated to the box: the pipeline's
-default) or `probit` (distributions/probit.py). `linear` is the ridge-regression baseline
+`model=name` would be, are the defaults), space `box` (fitted in parameter units, posterior truncated to
+the box; taken when no space is named) or `probit` (distributions/probit.py; the pipeline's default
+since issue 11). `linear` is the ridge-regression baseline
 (models/linear.py); every run should include it.
 """
 

@@ -54,13 +54,13 @@ def test_defaults_are_written_once_in_the_yaml(compose, group, name):
 
 
 # each task's inference defaults (its YAML's defaults list; measured in docs/tasks.md)
-TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, ensemble
-    "Pendulum": ("start", "mdnn", "full", False, 1),
-    "Cartpole": ("corrdiff", "mdnn", "diagonal", True, 1),
-    "Ant": ("corrdiff", "mdnn", "diagonal", True, 1),
-    "Humanoid": ("corrdiff", "mdnn", "diagonal", True, 1),
-    "ShadowHand": ("corrdiff", "mdnn", "diagonal", True, 3),
-    "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True, 3),
+TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, components, ensemble
+    "Pendulum": ("start", "mdnn", "full", False, 5, 1),
+    "Cartpole": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
+    "Ant": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
+    "Humanoid": ("corrdiff", "mdnn", "diagonal", True, 1, 1),
+    "ShadowHand": ("corrdiff", "mdnn", "diagonal", True, 5, 3),
+    "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True, 5, 3),
 }
 
 
@@ -68,7 +68,7 @@ TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, ensemble
 def test_a_task_chooses_its_inference_defaults(compose, task):
     cfg = compose([f"task={task}"])
     m = cfg.model
-    assert (cfg.summarizer.name, m.name, m.covariance, m.project_inputs, m.ensemble) == TASK_DEFAULTS[task]
+    assert (cfg.summarizer.name, m.name, m.covariance, m.project_inputs, m.components, m.ensemble) == TASK_DEFAULTS[task]
     assert cfg.method.parameter_space == "probit"
 
 

@@ -16,9 +16,10 @@ conditions one real trajectory, and the table gives
 - the number of held-out cases scored (all `--test`, or fewer where `--eval-seconds` ran out);
 - the guard's verdict (diagnostics/guard.py).
 
-A model spec is `name[:space][:key=value,key=value]`: name a conf/model YAML (its values are the
-defaults), space `box` (fitted in parameter units, posterior truncated to the box: the pipeline's
-default) or `probit` (distributions/probit.py). `linear` is the ridge-regression baseline
+A model spec is `name[:space][:key=value,key=value]`: name a conf/model YAML (its values, composed as
+`model=name` would be, are the defaults), space `box` (fitted in parameter units, posterior truncated to
+the box; taken when no space is named) or `probit` (distributions/probit.py; the pipeline's default
+since issue 11). `linear` is the ridge-regression baseline
 (models/linear.py); every run should include it.
 """
 
@@ -32,12 +33,10 @@ import torch
 import yaml
 from omegaconf import OmegaConf
 
-import bayessim_exp
 from bayessim_exp import api
 from bayessim_exp.diagnostics.guard import check_posterior
 from task_simulations import DEFAULT_CACHE, components, load_simulations
 
-CONF_MODEL_DIR = Path(bayessim_exp.__file__).parent / "conf" / "model"
 LEVELS = (0.5, 0.9)
 
 
@@ -51,10 +50,10 @@ def parse_spec(spec: str) -> tuple[str, bool, dict]:
             for item in part.split(","):
                 key, _, value = item.partition("=")
                 overrides[key] = yaml.safe_load(value)
-    cfg = OmegaConf.to_container(OmegaConf.load(CONF_MODEL_DIR / f"{name}.yaml"))
-    cfg.pop("name")
+    # composed as the CLI would: a variant (conf/model/mdnn_projected_diagonal.yaml) builds the model it names
+    cfg = OmegaConf.to_container(api.compose([f"model={name}"]).model)
     cfg.update(overrides)
-    return name, space == "probit", cfg
+    return cfg.pop("name"), space == "probit", cfg
 
 
 def summaries(task: str, summarizer: str, n: int, horizon: int, cache: Path, nthread: int, seconds: float):

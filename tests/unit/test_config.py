@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from omegaconf import OmegaConf
 
 from bayessim_exp import registry
 from bayessim_exp.pipeline import Pipeline
@@ -36,13 +37,55 @@ def test_every_experiment_builds(compose, tmp_path, name):
 
 
 @pytest.mark.parametrize("group, name", OPTIONS)
-def test_defaults_are_written_once_in_the_yaml(group, name):
-    params = registry.entry(group, name).params
+def test_defaults_are_written_once_in_the_yaml(compose, group, name):
+    text = (CONF / group / f"{name}.yaml").read_text()
+    assert text.startswith("#"), "every YAML starts with a comment saying what it is and how to use it"
+    registered = compose([f"{group}={name}"])[group].name
+    params = registry.entry(group, registered).params
     fields = dataclasses.fields(params)
     with_default = [f.name for f in fields
                     if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING]
-    assert not with_default, f"{params.__name__} repeats defaults of conf/{group}/{name}.yaml: {with_default}"
-    text = (CONF / group / f"{name}.yaml").read_text()
-    assert text.startswith("#"), "every YAML starts with a comment saying what it is and how to use it"
+    assert not with_default, f"{params.__name__} repeats defaults of conf/{group}/{registered}.yaml: {with_default}"
     keys = set(yaml.safe_load(text)) - {"name", "defaults"}
-    assert keys == {f.name for f in fields}
+    if registered == name:
+        assert keys == {f.name for f in fields}
+    else:  # a variant of a registered option (its defaults list names it) writes only what it changes
+        assert keys and keys <= {f.name for f in fields}
+
+
+# each task's inference defaults (its YAML's defaults list; measured in docs/tasks.md)
+TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, components, ensemble
+    "Pendulum": ("start", "mdnn", "full", False, 5, 1),
+    "Cartpole": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
+    "Ant": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
+    "Humanoid": ("corrdiff", "mdnn", "diagonal", True, 1, 1),
+    "ShadowHand": ("corrdiff", "mdnn", "diagonal", True, 5, 3),
+    "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True, 5, 3),
+}
+
+
+@pytest.mark.parametrize("task", sorted(TASK_DEFAULTS))
+def test_a_task_chooses_its_inference_defaults(compose, task):
+    cfg = compose([f"task={task}"])
+    m = cfg.model
+    assert (cfg.summarizer.name, m.name, m.covariance, m.project_inputs, m.components, m.ensemble) == TASK_DEFAULTS[task]
+    assert cfg.method.parameter_space == "probit"
+
+
+@pytest.mark.parametrize("override, key, value", [
+    ("summarizer=start", "summarizer.name", "start"),
+    ("model=flow", "model.name", "flow"),
+    ("model=mdnn", "model.covariance", "full"),
+    ("model.components=2", "model.components", 2),
+    ("method=simopt", "method.name", "simopt"),
+    ("method.parameter_space=box", "method.parameter_space", "box"),
+])
+def test_the_command_line_beats_a_task_default(compose, override, key, value):
+    for overrides in (["task=Ant", override], [override, "task=Ant"]):  # in either order
+        assert OmegaConf.select(compose(overrides), key) == value
+    assert compose(["task=Ant", override]).summarizer.name == ("start" if override == "summarizer=start" else "corrdiff")
+
+
+def test_an_experiment_beats_a_task_default(compose):
+    cfg = compose(["task=Ant", "experiment=bayessimig_pendulum"])
+    assert (cfg.task.name, cfg.summarizer.name, cfg.model.covariance) == ("Ant", "start", "full")

@@ -1,9 +1,12 @@
-"""MDNN recovers the closed-form posterior of a linear-Gaussian simulator."""
+"""MDNN recovers the closed-form posterior of a linear-Gaussian simulator; an ensemble is its members' average."""
+
+import math
 
 import pytest
 import torch
 
 from bayessim_exp import api
+from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.errors import TrainingError
 
 
@@ -15,11 +18,11 @@ def linear_gaussian(n, seed=0, noise=0.3):
     return theta, x, A, noise
 
 
-@pytest.mark.parametrize("covariance", ["full", "diagonal"])
-def test_mdnn_matches_analytic_gaussian_posterior(covariance):
+@pytest.mark.parametrize("covariance, ensemble", [("full", 1), ("diagonal", 1), ("diagonal", 3)])
+def test_mdnn_matches_analytic_gaussian_posterior(covariance, ensemble):
     theta, x, A, noise = linear_gaussian(12_000)
     fitted = api.fit_posterior_model("mdnn", theta, x, components=2, covariance=covariance, max_epochs=60,
-                                     patience=10, hidden=[64, 64])
+                                     patience=10, hidden=[64, 64], ensemble=ensemble)
     x_obs = torch.tensor([0.5, 0.2, -0.4])
     cov = torch.linalg.inv(torch.eye(2) + A.T @ A / noise**2)
     mean = cov @ (A.T @ x_obs / noise**2)
@@ -68,4 +71,22 @@ def test_embedding_is_trained_jointly():
     before = embedding.weight.detach().clone()
     model.fit(theta, x, seed=1)  # fine-tuning moves the embedding with the rest of the network
     assert not torch.allclose(before, embedding.weight)
-    assert any(k.startswith("body.0.") for k in model.state_dict()["net"])  # saved with the model
+    assert any(k.startswith("embedding.") for k in model.state_dict()["net"])  # saved with the model
+
+
+def test_ensemble_is_the_equally_weighted_average_of_different_members():
+    theta, x, _, _ = linear_gaussian(2000)
+    fitted = api.fit_posterior_model("mdnn", theta, x, components=2, ensemble=3, max_epochs=3, hidden=[16])
+    model, x_obs = fitted.model, torch.tensor([0.5, 0.2, -0.4])
+    post = model.conditional(x_obs)
+    assert post.num_components == 6
+    members = []
+    for member in model.members:  # each member alone, as a one-network MDNN would condition
+        logits, means, U = member(model._inputs(x_obs[None]))
+        U_inv = torch.linalg.inv(U[0].double())
+        members.append(GaussianMixture(logits[0], means[0], U_inv @ U_inv.transpose(-1, -2))
+                       .affine(model.theta_norm.shift, model.theta_norm.scale))
+    points = torch.randn(50, 2, dtype=torch.float64)
+    densities = torch.stack([m.log_prob(points) for m in members])
+    torch.testing.assert_close(post.log_prob(points), torch.logsumexp(densities, 0) - math.log(3))
+    assert not torch.allclose(members[0].mean, members[1].mean)  # initialised apart

@@ -5,18 +5,15 @@ from __future__ import annotations
 
 import os
 import time
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 import torch
-from omegaconf import OmegaConf
 
 from bayessim_exp import registry
 from bayessim_exp.errors import ConfigError
 
-CONF = Path(__file__).resolve().parents[2] / "conf" / "task"
 TASKS = registry.names("task")
 
 HORIZON = 30  # control steps of the sensitivity rollouts
@@ -24,7 +21,7 @@ MIN_CHANGE = 1e-3  # max |obs_low - obs_high| over the rollout below which a par
 
 
 def task_cfg(name: str) -> dict:
-    return OmegaConf.to_container(OmegaConf.load(CONF / f"{name}.yaml"), resolve=True)
+    return registry.option_defaults("task", name)  # the task's own values, without its defaults list
 
 
 def make_task(cfg: dict):

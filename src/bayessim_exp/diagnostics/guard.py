@@ -36,8 +36,8 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None,
     if mean_gain is not None and not mean_gain > 0:
         warnings.append(
             f"the posterior is worse than the prior on held-out simulations (mean log-density gain {mean_gain:+.2f} "
-            "nats): do not randomize with it. Try the probit parameter space (method.parameter_space=probit; "
-            "api.fit_posterior_model(..., probit=True)), model.covariance=diagonal with fewer components, a summarizer that carries more "
+            "nats): do not randomize with it. Try the probit parameter space if box was set (method.parameter_space=probit; "
+            "api.fit_posterior_model(..., probit=True)), model=mdnn_projected_diagonal, model.covariance=diagonal with fewer components, a summarizer that carries more "
             "information (corrdiff, waypoints), more simulations, or model=linear as a floor")
     for level, value in (coverage or {}).items():
         nominal = float(level)
@@ -45,8 +45,9 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None,
         if value < nominal - tol:
             warnings.append(
                 f"overconfident: {value:.0%} of held-out true parameters fall in the {nominal:.0%} credible region: "
-                "the posterior is too narrow. Try stronger regularisation (weight_decay, smaller hidden layers), "
-                "model.covariance=diagonal, more simulations, or method.parameter_space=probit")
+                "the posterior is too narrow. Try an ensemble (model.ensemble=3, mdnn), stronger regularisation "
+                "(weight_decay, smaller hidden layers), model.covariance=diagonal, more simulations, or "
+                "method.parameter_space=probit if box was set")
         elif value > nominal + tol:
             warnings.append(
                 f"underconfident: {value:.0%} of held-out true parameters fall in the {nominal:.0%} credible region: "

@@ -3,6 +3,10 @@
 Inputs and targets are standardised with statistics of the first training set; components
 are parameterised by the upper Cholesky factor U of their precision (positive diagonal via
 exp), so that log N(theta; mu, (U^T U)^-1) = sum log diag U - |U (theta - mu)|^2 / 2 - D/2 log 2pi.
+
+`ensemble` > 1: that many networks from different initialisations, each trained on its own
+negative log-likelihood (in one loop, on the same batches), and q is their equally weighted
+average, itself a Gaussian mixture (docs/statistics.md: averaging corrects overconfidence).
 """
 
 from __future__ import annotations
@@ -28,9 +32,12 @@ class MdnnConfig(TrainConfig):
     hidden: list[int]
     activation: str
     covariance: str  # full | diagonal
+    ensemble: int  # networks averaged
 
     def validate(self) -> None:
         super().validate()
+        if self.ensemble < 1:
+            raise ConfigError(f"ensemble must be an integer >= 1, got {self.ensemble}")
         if self.components < 1:
             raise ConfigError(f"components must be an integer >= 1, got {self.components}")
         if not self.hidden or any(h < 1 for h in self.hidden):
@@ -89,29 +96,36 @@ class MDNN(StandardizedDensityModel):
         self.embedding = embedding if embedding is not None else nn.Identity()
         self.projection = input_projection(cfg, theta_dim, x_dim, embedding)
         with torch.no_grad():
-            width = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
-        layers = []
-        for h in cfg.hidden:
-            layers += [nn.Linear(width, h), act()]
-            width = h
-        self.body = nn.Sequential(self.embedding, *layers)
-        self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
+            in_width = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
+        self.members = nn.ModuleList()
+        for _ in range(cfg.ensemble):
+            layers, width = [], in_width
+            for h in cfg.hidden:
+                layers += [nn.Linear(width, h), act()]
+                width = h
+            head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
+            self.members.append(nn.Sequential(*layers, head))
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
-        self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm,
+        self.net = nn.ModuleDict({"embedding": self.embedding, "members": self.members, "x_norm": self.x_norm,
+                                  "theta_norm": self.theta_norm,
                                   **({} if self.projection is None else {"projection": self.projection})})
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
-        return mixture_nll(*self.head(self.body(x_std)), theta_std)
+        # the mean of the members' own losses: each member is trained as if alone
+        h = self.embedding(x_std)
+        return torch.stack([mixture_nll(*member(h), theta_std) for member in self.members]).mean(0)
 
     @torch.no_grad()
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
-        """q(theta | x_obs) in parameter units, for one summary x_obs [F]."""
+        """q(theta | x_obs) in parameter units, for one summary x_obs [F]: the members' mixtures, equally weighted."""
         self.net.eval()
-        logits, means, U = self.head(self.body(self._inputs(x_obs.float().reshape(1, -1))))
+        h = self.embedding(self._inputs(x_obs.float().reshape(1, -1)))
+        logits, means, U = (torch.cat(parts) for parts in zip(*[
+            (torch.log_softmax(lg[0].double(), -1), mu[0], u[0]) for lg, mu, u in (member(h) for member in self.members)]))
         eye = torch.eye(self.theta_dim, dtype=torch.float64)
-        U_inv = torch.linalg.solve_triangular(U[0].double(), eye.expand_as(U[0]), upper=True)
+        U_inv = torch.linalg.solve_triangular(U.double(), eye.expand_as(U), upper=True)
         covs = U_inv @ U_inv.transpose(-1, -2)
-        std = GaussianMixture(logits[0], means[0], covs)
+        std = GaussianMixture(logits, means, covs)
         return std.affine(self.theta_norm.shift, self.theta_norm.scale)
 
 

@@ -92,14 +92,17 @@ class MDRFF(MDNN):
         with torch.no_grad():
             self.feature_in_dim = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
         self.rff = RandomFourierFeatures(self.feature_in_dim, cfg.features)
-        layers, width = [self.embedding, self.rff], cfg.features
+        layers, width = [], cfg.features
         for h in cfg.hidden:
             layers += [nn.Linear(width, h), ACTIVATIONS[cfg.activation]()]
             width = h
-        self.body = nn.Sequential(*layers)
-        self.head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
+        # MDNN's loss and conditioning with one member behind the (embedding, random features) front
+        self.embedding = nn.Sequential(self.embedding, self.rff)
+        self.members = nn.ModuleList([nn.Sequential(*layers, MixtureHead(width, theta_dim, cfg.components,
+                                                                         cfg.covariance == "full"))])
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
-        self.net = nn.ModuleDict({"body": self.body, "head": self.head, "x_norm": self.x_norm, "theta_norm": self.theta_norm,
+        self.net = nn.ModuleDict({"embedding": self.embedding, "members": self.members, "x_norm": self.x_norm,
+                                  "theta_norm": self.theta_norm,
                                   **({} if self.projection is None else {"projection": self.projection})})
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:

@@ -112,6 +112,12 @@ def test_untruncated_gaussian_prior_runs(compose, tmp_path):
     assert all(v > 0 for v in results["rounds"][-1]["posterior_std"].values())
 
 
+def test_probit_space_asked_for_an_unbounded_prior_names_the_fix(compose, tmp_path):
+    from bayessim_exp.errors import ConfigError
+
+    cfg = compose(SMOKE + ["prior=gaussian", "prior.truncate=false", "method.parameter_space=probit"])
+    with pytest.raises(ConfigError, match="set method.parameter_space=box"):
+        Pipeline(cfg, tmp_path).run()
 
 
 def test_same_seed_gives_the_same_results(compose, tmp_path):

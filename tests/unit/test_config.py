@@ -69,7 +69,7 @@ def test_a_task_chooses_its_inference_defaults(compose, task):
     cfg = compose([f"task={task}"])
     m = cfg.model
     assert (cfg.summarizer.name, m.name, m.covariance, m.project_inputs, m.components, m.ensemble) == TASK_DEFAULTS[task]
-    assert cfg.method.parameter_space == "probit"
+    assert cfg.method.parameter_space == "auto"
 
 
 @pytest.mark.parametrize("override, key, value", [

@@ -39,6 +39,9 @@ log = logging.getLogger(__name__)
 #   gaussian   the previous posterior moment-matched to one Gaussian (SNPE-A in closed form for mixtures)
 #   truncated  the prior restricted to the previous posterior's 99.9 % HPD region (TSNPE, no correction)
 PROPOSALS = ("prior", "posterior", "gaussian", "truncated")
+# probit: fitted on the prior's CDFs mapped through the normal quantile (posteriors stay on the box);
+# box: in parameter units; auto: probit where the prior allows it (independent, on a box), else box
+PARAMETER_SPACES = ("auto", "probit", "box")
 # SNPE-A needs the model trained on draws from a single proposal: the current round's simulations only
 _SINGLE_ROUND_PROPOSALS = ("posterior", "gaussian")
 
@@ -48,12 +51,12 @@ class BayesSimConfig:
     proposal: str  # prior | posterior | gaussian | truncated
     finetune: bool  # continue training the previous round's model (false: re-initialise)
     max_components: int  # mixture components kept when combining several real trajectories
-    parameter_space: str  # box | probit: what the model is fitted in (distributions/probit.py)
+    parameter_space: str  # auto | probit | box: what the model is fitted in (distributions/probit.py)
     combination: str  # several real trajectories: dispersion | product (combination.py)
 
     def validate(self) -> None:
-        if self.parameter_space not in ("box", "probit"):
-            raise ConfigError(f"parameter_space={self.parameter_space!r} not allowed; allowed: box, probit")
+        if self.parameter_space not in PARAMETER_SPACES:
+            raise ConfigError(f"parameter_space={self.parameter_space!r} not allowed; allowed: {', '.join(PARAMETER_SPACES)}")
         if self.proposal not in PROPOSALS:
             raise ConfigError(f"proposal={self.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
         if self.combination not in COMBINATIONS:
@@ -66,10 +69,7 @@ class BayesSim(InferenceMethod):
     def __init__(self, cfg: BayesSimConfig, comp):
         self.cfg, self.comp = cfg, comp
         self._proposals: dict[int, ParameterDistribution | None] = {}
-        try:
-            self.probit = ProbitTransform(comp.prior) if cfg.parameter_space == "probit" else None
-        except ValueError as exc:
-            raise ConfigError(f"method.parameter_space=probit: {exc}") from None
+        self.probit = _probit_transform(cfg.parameter_space, comp.prior)
 
     def stages(self) -> list[Stage]:
         return [
@@ -228,6 +228,18 @@ class BayesSim(InferenceMethod):
             "dispersion": ctx.output("condition")["dispersion"],
             **{k: v for k, v in ctx.output("model_check").items() if k != "seconds"},
         }
+
+
+def _probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransform | None:
+    if space == "box":
+        return None
+    try:
+        return ProbitTransform(prior)
+    except ValueError as exc:
+        if space == "auto":
+            log.info("method.parameter_space=auto: %s; fitting in parameter units", exc)
+            return None
+        raise ConfigError(f"method.parameter_space=probit: {exc}; set method.parameter_space=box (or auto)") from None
 
 
 @register("method", "bayessim", BayesSimConfig)

@@ -122,7 +122,7 @@ class ActorPolicy:
         from tensordict import TensorDict  # torchrl loads only where an actor is used
         from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-        device = next(self.actor.parameters()).device  # the simulator's observations may live elsewhere
+        device = _device_of(self.actor, obs.device)  # the simulator's observations may live elsewhere
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             td = self.actor(TensorDict({"observation": obs.float().to(device)}, batch_size=obs.shape[:1], device=device))
         action = td["action"].clamp(-1.0, 1.0)
@@ -130,6 +130,12 @@ class ActorPolicy:
             explore = (torch.rand(obs.shape[0], generator=self.random.generator) < self.random_share).to(device)
             action = torch.where(explore[:, None], self.random.act(obs, t).to(action), action)
         return action
+
+
+def _device_of(actor, default: torch.device) -> torch.device:
+    """Where the actor's weights live (an actor without parameters: `default`)."""
+    first = next(actor.parameters(), None) if isinstance(actor, torch.nn.Module) else None
+    return default if first is None else first.device
 
 
 def actor_policy(actor, action_dim: int, seed: int, random_share: float, name: str):

@@ -46,7 +46,7 @@ def test_written_fields_read_back_per_environment(model):
     )
     values = np.array([[0.5, 0.0, 0.5, 0.2, -8.0], [2.0, 1.0, 2.0, 1.5, -12.0], [3.0, 2.0, 1.0, 0.9, -9.81]])
     sim = NativeSimulator.__new__(NativeSimulator)  # only the batch and task are needed here
-    sim.batch = mujoco.batch.Batch(model, 3, nthread=1)
+    sim.batch, sim.model = mujoco.batch.Batch(model, 3, nthread=1), model
     sim.num_envs = 3
     sim.task = type("T", (), {"spec": spec, "model": model})()
     sim.set_params(values, np.arange(3))

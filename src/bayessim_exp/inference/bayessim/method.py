@@ -69,7 +69,7 @@ class BayesSim(InferenceMethod):
     def __init__(self, cfg: BayesSimConfig, comp):
         self.cfg, self.comp = cfg, comp
         self._proposals: dict[int, ParameterDistribution | None] = {}
-        self.probit = _probit_transform(cfg.parameter_space, comp.prior)
+        self.probit = None if cfg.parameter_space == "box" else _probit_transform(cfg.parameter_space, comp.prior)
 
     def stages(self) -> list[Stage]:
         return [
@@ -231,8 +231,7 @@ class BayesSim(InferenceMethod):
 
 
 def _probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransform | None:
-    if space == "box":
-        return None
+    """parameter_space probit or auto: the transform, None where auto falls back to parameter units."""
     try:
         return ProbitTransform(prior)
     except ValueError as exc:

@@ -116,13 +116,17 @@ class ActorPolicy:
     def __init__(self, actor, action_dim: int, seed: int, random_share: float):
         self.actor, self.random_share = actor, random_share
         self.random = RandomPolicy(action_dim, seed)
+        # where the actor's weights live; the simulator's observations may live elsewhere (None: a
+        # parameter-free actor, which acts where the observations are)
+        first = next(actor.parameters(), None) if isinstance(actor, torch.nn.Module) else None
+        self.device = None if first is None else first.device
 
     @torch.no_grad()
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         from tensordict import TensorDict  # torchrl loads only where an actor is used
         from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-        device = _device_of(self.actor, obs.device)  # the simulator's observations may live elsewhere
+        device = self.device or obs.device
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             td = self.actor(TensorDict({"observation": obs.float().to(device)}, batch_size=obs.shape[:1], device=device))
         action = td["action"].clamp(-1.0, 1.0)
@@ -130,12 +134,6 @@ class ActorPolicy:
             explore = (torch.rand(obs.shape[0], generator=self.random.generator) < self.random_share).to(device)
             action = torch.where(explore[:, None], self.random.act(obs, t).to(action), action)
         return action
-
-
-def _device_of(actor, default: torch.device) -> torch.device:
-    """Where the actor's weights live (an actor without parameters: `default`)."""
-    first = next(actor.parameters(), None) if isinstance(actor, torch.nn.Module) else None
-    return default if first is None else first.device
 
 
 def actor_policy(actor, action_dim: int, seed: int, random_share: float, name: str):

@@ -13,9 +13,10 @@ from bayessim_exp.report.build import build_report
 from bayessim_exp.report.metrics import interval
 
 
-def results(seed, gains, summarizer="start", coverage=0.5):
+def results(seed, gains, summarizer="start", coverage=0.5, rl_return=None):
+    rl = None if rl_return is None else {"mean": rl_return, "min": rl_return - 1, "max": rl_return + 1, "std": 1.0}
     rounds = [{"round": r + 1, "log_prob_gain": g, "posterior_std": {"a": 0.1, "b": 0.4}, "prior_std": {"a": 0.2, "b": 0.4},
-               "coverage": {"hpd": {"0.5": coverage}}, "surrogate_real_return": None,
+               "coverage": {"hpd": {"0.5": coverage}}, "surrogate_real_return": rl,
                "seconds": {"collect": 1.0, "fit": 2.0}} for r, g in enumerate(gains)]
     return {"task": "Pendulum", "model": "mdnn", "summarizer": summarizer, "policy": "random", "seed": seed,
             "param_names": ["a", "b"], "true_params": {"a": 1.0, "b": 2.0}, "rounds": rounds}
@@ -42,7 +43,7 @@ def sweep(tmp_path):
     make_job(sweep, "0_start_s0", ["summarizer=start", "seed=0", *common], result=results(0, [0.5, 1.0], coverage=0.4))
     make_job(sweep, "1_start_s1", ["summarizer=start", "seed=1", *common], result=results(1, [1.5, 3.0], coverage=0.9))
     make_job(sweep, "2_way_s0", ["summarizer=waypoints", "seed=0", *common],
-             result=results(0, [0.2, 2.0], "waypoints"))
+             result=results(0, [0.2, 2.0], "waypoints", rl_return=-200.0))
     make_job(sweep, "3_way_s1", ["summarizer=waypoints", "seed=1", *common], result=results(1, [0.1], "waypoints"))
     make_job(sweep, "4_corr_s0", ["summarizer=corr", "seed=0", *common],
              error="Traceback (most recent call last):\n  ...\nPosteriorError: round 1: no mass in the box\n")
@@ -52,7 +53,7 @@ def sweep(tmp_path):
     job = make_job(sweep, "7_way_s2", ["summarizer=waypoints", "seed=2", *common], error="killed\n")
     old = time.time() - 60
     os.utime(job / "error.txt", (old, old))
-    (job / "results.json").write_text(json.dumps(results(2, [0.3, 1.0], "waypoints")))
+    (job / "results.json").write_text(json.dumps(results(2, [0.3, 1.0], "waypoints", rl_return=-100.0)))
     (sweep / ".submitit" / "12_0").mkdir(parents=True)  # launcher files are not jobs
     return sweep
 
@@ -78,7 +79,8 @@ def test_statuses_intervals_and_failures(sweep):
     assert float(start["std_ratio_mean"]) == pytest.approx(0.75)
     assert float(start["coverage_hpd_0.5_ci_low"]) == 0.0 and float(start["coverage_hpd_0.5_ci_high"]) == 1.0
     assert float(start["wall_seconds_mean"]) == pytest.approx(6.0)
-    assert "surrogate_real_return_mean" not in start  # no job ran RL
+    assert start["surrogate_real_return_mean"] == ""  # no job of this configuration ran RL
+    assert float(rows["summarizer=waypoints"]["surrogate_real_return_mean"]) == pytest.approx(-150.0)
     assert (rows["summarizer=corr"]["finished"], rows["summarizer=corr"]["failed"],
             rows["summarizer=corr"]["unfinished"]) == ("0", "2", "1")
 

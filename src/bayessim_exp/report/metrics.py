@@ -32,7 +32,7 @@ def job_metrics(results: dict) -> dict[str, float | None]:
     for kind, levels in sorted((last.get("coverage") or {}).items()):
         for level, value in sorted(levels.items(), key=lambda kv: float(kv[0])):
             out[f"coverage_{kind}_{level}"] = value
-    out["surrogate_real_return"] = last.get("surrogate_real_return")
+    out["surrogate_real_return"] = (last.get("surrogate_real_return") or {}).get("mean")  # rl/component.py record()
     out["wall_seconds"] = float(sum(sum((r.get("seconds") or {}).values()) for r in rounds))
     return out
 

@@ -91,10 +91,9 @@ class Pipeline:
             ctx = RoundContext(self.comp, self.run_dir, r, self.rc.seed, self.tb)
             seconds = {}
             for stage in self.stages:
-                if run_stage(ctx, stage):
-                    self._drop_consumed(ctx, stage)
-                    if stop_after == (r, stage.name):
-                        return results
+                if run_stage(ctx, stage) and stop_after == (r, stage.name):
+                    return results
+            self._shrink_transients(ctx)
             for stage in self.stages:
                 if self.run_dir.has(r, stage.name):
                     seconds[stage.name] = round(float(ctx.output(stage.name)["seconds"]), 3)
@@ -106,13 +105,13 @@ class Pipeline:
             self._tb.close()
         return results
 
-    def _drop_consumed(self, ctx: RoundContext, finished: Stage) -> None:
-        """A transient artifact shrinks to its timing once the last stage that reads it has finished."""
+    def _shrink_transients(self, ctx: RoundContext) -> None:
+        """At the end of a round (also a resumed one) every transient artifact shrinks to its timing."""
         for stage in self.stages:
-            if stage.transient and stage.name in finished.inputs:
-                readers = [s for s in self.stages if stage.name in s.inputs]
-                if all(self.run_dir.has(ctx.round, s.name) for s in readers):
-                    self.run_dir.save(ctx.round, stage.name, {"seconds": ctx.output(stage.name)["seconds"]})
+            if stage.transient and set(ctx.output(stage.name)) != {"seconds"}:
+                shrunk = {"seconds": ctx.output(stage.name)["seconds"]}
+                self.run_dir.save(ctx.round, stage.name, shrunk)
+                ctx.remember(stage.name, shrunk)
 
     def _record(self, ctx: RoundContext, seconds: dict) -> dict:
         ctx.stage = "record"

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import logging
 from pathlib import Path
 
@@ -75,9 +76,10 @@ class FileReal:
         if not self.path.is_file():
             raise ConfigError(f"real.path={cfg.path!r}: no such file")
         self.task = task
-        self.fingerprint = hashlib.sha256(self.path.read_bytes()).hexdigest()
+        raw = self.path.read_bytes()  # read once: hashed and parsed
+        self.fingerprint = hashlib.sha256(raw).hexdigest()
         try:
-            with np.load(self.path, allow_pickle=False) as data:
+            with np.load(io.BytesIO(raw), allow_pickle=False) as data:
                 self._data = {k: data[k] for k in data.files}
         except (OSError, ValueError) as exc:
             raise DataError(f"{self.path}: not a readable npz file ({exc}); write it with "
@@ -112,7 +114,7 @@ class FileReal:
         if round_index > 1:
             return None
         if self._trajectories is None:
-            self.check(horizon)
+            raise RuntimeError("FileReal.check(horizon) validates the file and must run before collect")
         return self._trajectories
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 from run_results import without_seconds
 
+from bayessim_exp.artifacts import RunDir
 from bayessim_exp.report.build import build_report
 
 pytestmark = pytest.mark.slow
@@ -69,8 +70,10 @@ def test_a_job_killed_while_fitting_resumes_and_matches_a_run_never_killed(tmp_p
     resumed = cli(*args, f"hydra.run.dir={run_dir}", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr[-3000:]
     assert "round 1: summarize done" not in resumed.stderr + resumed.stdout  # not redone
-    # finished artifacts untouched, but for the transient collect.pt, which shrinks to its timing once summarized
+    # finished artifacts untouched, but for the transient collect.pt, which shrinks to its timing once summarized,
+    # round 1's too although its summarize stage was not rerun
     assert all(p.stat().st_mtime_ns == t for p, t in finished.items() if p.name != "collect.pt")
+    assert all(set(RunDir(run_dir).load(r, "collect")) == {"seconds"} for r in (1, 2))
     expected = json.loads((tmp_path / "reference" / "results.json").read_text())
     got = json.loads((run_dir / "results.json").read_text())
     assert len(got["rounds"]) == 2

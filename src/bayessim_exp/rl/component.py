@@ -27,7 +27,7 @@ from ..stages import RoundContext, Stage
 from .config import PPOComponentConfig
 from .env import SimulatorEnv, distribution_sampler, fixed_params
 from .evaluate import episode_returns, summary
-from .ppo import PPOTrainer
+from .ppo import PPOTrainer, make_agent
 
 log = logging.getLogger(__name__)
 
@@ -79,8 +79,15 @@ class PPOComponent:
         """The latest trained actor at this point of the round (None before the first train_policy)."""
         for r in range(ctx.round, 0, -1):
             if ctx.has("train_policy", r):
-                return self.trainer(ctx.output("train_policy", r)["trainer"]).actor
+                return self._actor(ctx.output("train_policy", r)["trainer"])
         return None
+
+    def _actor(self, state: dict):
+        """The trained actor alone: loss, advantage and optimiser are only for training (and this runs at
+        every collect-policy build)."""
+        agent = make_agent(self.train_cfg, self.task.obs_dim, self.task.action_dim, self.device)
+        agent.load_state_dict(state["agent"])
+        return agent.actor
 
     def evaluate(self, ctx: RoundContext) -> dict:
         from ..policies import ActorPolicy
@@ -90,7 +97,7 @@ class PPOComponent:
         if real_params is None:
             log.warning("round %d: the real data source has no true parameters: no surrogate-real evaluation", ctx.round)
             return {"summary": None, "video": None}
-        actor = self.trainer(ctx.output("train_policy")["trainer"]).actor
+        actor = self._actor(ctx.output("train_policy")["trainer"])
         e = self.cfg.evaluate
         returns = episode_returns(actor, ctx.comp.sims.get(e.episodes), real_params, ctx.seed)
         out = {"returns": returns, "summary": summary(returns), "video": None}

@@ -24,14 +24,8 @@ ParamSampler = Callable[[int, torch.Generator], torch.Tensor]
 
 
 def distribution_sampler(distribution) -> ParamSampler:
-    """Draws from any project distribution (prior, posterior) with `.sample((n,))`, seeded per call."""
-
-    def sample(n: int, generator: torch.Generator) -> torch.Tensor:
-        with torch.random.fork_rng():
-            torch.manual_seed(int(torch.randint(2**62, (1,), generator=generator)))
-            return distribution.sample((n,)).double()
-
-    return sample
+    """Draws from any project distribution (prior, posterior): ParameterDistribution.sample takes the generator."""
+    return lambda n, generator: distribution.sample((n,), generator=generator).double()
 
 
 def fixed_params(values: np.ndarray | torch.Tensor) -> ParamSampler:

@@ -22,12 +22,16 @@ from .env import SimulatorEnv
 from .networks import Agent
 
 
+def make_agent(cfg: PPOConfig, obs_dim: int, action_dim: int, device: torch.device | str) -> Agent:
+    return Agent(obs_dim, action_dim, cfg.hidden, cfg.obs_clip, cfg.init_log_std).to(device)
+
+
 class PPOTrainer:
     """Networks, optimiser and loss of one policy; `train` improves it on an environment."""
 
     def __init__(self, cfg: PPOConfig, obs_dim: int, action_dim: int, device: torch.device | str = "cpu"):
         self.cfg = cfg
-        self.agent = Agent(obs_dim, action_dim, cfg.hidden, cfg.obs_clip, cfg.init_log_std).to(device)
+        self.agent = make_agent(cfg, obs_dim, action_dim, device)
         self.loss = ClipPPOLoss(self.agent.actor, self.agent.critic, clip_epsilon=cfg.clip_epsilon,
                                 entropy_coeff=cfg.entropy_coeff, critic_coeff=cfg.critic_coeff,
                                 normalize_advantage=True, loss_critic_type="smooth_l1")

@@ -23,12 +23,11 @@ from collections.abc import Sequence
 
 import torch
 
-from .correction import posterior
+from .correction import moments, posterior
 
 log = logging.getLogger(__name__)
 
 COMBINATIONS = ("dispersion", "product")
-_MOMENT_DRAWS = 4000
 
 
 @dataclasses.dataclass
@@ -56,13 +55,11 @@ class Dispersion:
 def dispersion(singles: Sequence, seed: int = 0) -> Dispersion:
     """Cochran's Q of posteriors given one trajectory each (n >= 2), from their sampled moments."""
     means, precisions = [], []
-    with torch.random.fork_rng():
-        torch.manual_seed(seed)
-        for post in singles:
-            draws = post.sample((_MOMENT_DRAWS,)).double()
-            cov = torch.atleast_2d(torch.cov(draws.T))
-            means.append(draws.mean(0))
-            precisions.append(torch.linalg.inv(cov + 1e-12 * cov.diagonal().mean() * torch.eye(len(cov), dtype=cov.dtype)))
+    for post in singles:
+        mean, cov = moments(post, seed)
+        means.append(mean.double())
+        cov = cov.double()
+        precisions.append(torch.linalg.inv(cov + 1e-12 * cov.diagonal().mean() * torch.eye(len(cov), dtype=cov.dtype)))
     m_i, p_i = torch.stack(means), torch.stack(precisions)
     pooled = torch.linalg.solve(p_i.sum(0), (p_i @ m_i.unsqueeze(-1)).sum(0)).squeeze(-1)
     d = m_i - pooled

@@ -95,13 +95,19 @@ def _apply_gaussian_ratio(mix: GaussianMixture, lam: torch.Tensor, eta: torch.Te
     return GaussianMixture(mix.log_weights + log_c, new_means, torch.cholesky_inverse(chol))
 
 
+def moments(dist, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean and covariance: exact for a Gaussian mixture, else from _MOMENT_DRAWS seeded draws."""
+    if isinstance(dist, GaussianMixture):
+        return dist.mean, dist.covariance
+    s = dist.sample((_MOMENT_DRAWS,), generator=torch.Generator().manual_seed(seed)).double()
+    return s.mean(0), torch.atleast_2d(torch.cov(s.T))
+
+
 def _moment_gaussian(dist) -> GaussianMixture:
     if isinstance(dist, GaussianMixture):
         return dist
-    with torch.random.fork_rng():
-        torch.manual_seed(0)
-        s = dist.sample((_MOMENT_DRAWS,)).double()
-    return GaussianMixture(torch.zeros(1), s.mean(0, keepdim=True), torch.cov(s.T).reshape(1, s.shape[1], s.shape[1]))
+    mean, cov = moments(dist)
+    return GaussianMixture(torch.zeros(1), mean[None], cov[None])
 
 
 def _product(mixtures: Sequence[GaussianMixture], max_components: int) -> GaussianMixture:

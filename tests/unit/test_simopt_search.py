@@ -65,7 +65,9 @@ def test_the_spread_stops_at_the_floor():
     gaussians, _ = search(start(cfg), lambda theta: disc(oscillator(theta)), cfg, 200, LOW, HIGH,
                           torch.Generator().manual_seed(1))
     floor = (cfg.min_std * (HIGH - LOW)) ** 2
-    assert (torch.linalg.eigvalsh(gaussians[-1].cov / floor.sqrt()[:, None] / floor.sqrt()[None]) >= 1 - 1e-9).all()
+    whitened = torch.linalg.eigvalsh(gaussians[-1].cov / floor.sqrt()[:, None] / floor.sqrt()[None])
+    assert (whitened >= 1 - 1e-9).all()
+    assert whitened.min() < 1 + 1e-3  # reached, not only respected
 
 
 def test_draws_outside_the_box_are_simulated_inside_it_and_diverged_ones_get_no_weight():

@@ -15,7 +15,6 @@ docs/statistics.md says what a user can do about each.
 from __future__ import annotations
 
 import logging
-import math
 
 import torch
 
@@ -33,10 +32,10 @@ def summaries_outside(x_real: torch.Tensor, x_sim: torch.Tensor) -> dict:
 
 
 def _binomial_tail(count: int, trials: int, chance: float) -> float:
-    """P(X >= count) for X ~ binomial(trials, chance), summed exactly in log space."""
-    terms = [math.lgamma(trials + 1) - math.lgamma(k + 1) - math.lgamma(trials - k + 1) + k * math.log(chance)
-             + (trials - k) * math.log1p(-chance) for k in range(count, trials + 1)]
-    return min(1.0, math.exp(torch.logsumexp(torch.tensor(terms, dtype=torch.float64), 0).item())) if terms else 0.0
+    """P(X >= count) for X ~ binomial(trials, chance)."""
+    from scipy.stats import binom
+
+    return float(binom.sf(count - 1, trials, chance))
 
 
 def mismatch_report(round_index: int, outside: dict, replay: dict | None, dispersion: dict | None,

@@ -8,7 +8,7 @@ prior's range are batched too. Observations, rewards and terminations are the ta
 run with xp=jax.numpy inside the compiled step. Arrays reach torch through DLPack, without copies.
 
 Compilations: one step and one reset per simulator (the pool keeps one per batch size), one fused
-rollout per horizon; JAX's persistent compilation cache (`cache_dir`) keeps them across processes.
+rollout per horizon (jax.jit's cache, keyed by the actions' shape); JAX's persistent compilation cache (`cache_dir`) keeps them across processes.
 A slot that breaks down is frozen at its last finite state (the fields mjx.step reads), so it neither
 spreads NaNs nor keeps the solver iterating, and it stays flagged until its next reset.
 """
@@ -115,11 +115,9 @@ class MjxSimulator(Simulator):
         self.data = jax.tree_util.tree_map(lambda x: self._put(np.repeat(np.asarray(x)[None], num_envs, 0)), template)
         self.obs = self._put(np.zeros((num_envs, task.obs_dim)), np.float32)
         self.broken = self._put(np.zeros(num_envs, bool))  # since the last reset
-        lo, hi = m.actuator_ctrlrange.T
-        self._ctrl_mid, self._ctrl_half = (hi + lo) / 2, (hi - lo) / 2
         self._reset_fn = jax.jit(self._reset_all)
         self._step_fn = jax.jit(self._control_step)
-        self._rollouts: dict[int, Any] = {}
+        self._rollout_fn = jax.jit(self._scan)  # one compilation per horizon (the actions' shape)
 
     def _put(self, x: Any, dtype: Any = None) -> Any:
         return self.jax.device_put(np.asarray(x, dtype), self._dev)
@@ -137,8 +135,7 @@ class MjxSimulator(Simulator):
 
     @property
     def device(self) -> torch.device:
-        dev = self.data.qpos.devices().pop()
-        return torch.device("cuda", dev.id) if dev.platform == "gpu" else torch.device("cpu")
+        return torch.device("cuda", self._dev.id) if self._dev.platform == "gpu" else torch.device("cpu")
 
     def _varying_constants(self) -> list[str]:
         """Constants mj_setConst derives that change within the prior's box (batched alongside)."""
@@ -178,8 +175,7 @@ class MjxSimulator(Simulator):
         jax, jnp = self.jax, self.jnp
         mx = self._model(leaves)
         before = data
-        data = data.replace(ctrl=jnp.asarray(self._ctrl_mid + self._ctrl_half * jnp.clip(actions, -1.0, 1.0),
-                                             data.ctrl.dtype))
+        data = data.replace(ctrl=jnp.asarray(self.task.ctrl(actions, xp=jnp), data.ctrl.dtype))
         step = jax.vmap(self.mjx.step, in_axes=(self._model_axes, 0))
         data = jax.lax.fori_loop(0, self.task.frame_skip, lambda _, d: step(mx, d), data)
         now_broken = broke_down(data.qpos, data.qvel, self.cfg.max_abs_qvel, xp=jnp)
@@ -244,9 +240,7 @@ class MjxSimulator(Simulator):
             return super().rollout(params, policy, horizon, seed, progress, state)
         self.reset(params, None, seed, state)
         actions = policy.open_loop_actions(self.num_envs, horizon).to(self.device, torch.float32).clamp(-1.0, 1.0)
-        if horizon not in self._rollouts:
-            self._rollouts[horizon] = self.jax.jit(self._scan)
-        out = self._rollouts[horizon](self.leaves, self.data, self.obs, self.broken,
+        out = self._rollout_fn(self.leaves, self.data, self.obs, self.broken,
                                       self.jnp.from_dlpack(actions.transpose(0, 1).contiguous()))
         self.data, self.obs, self.broken, states, acts, rewards, valid, diverged = out
         self.elapsed += horizon

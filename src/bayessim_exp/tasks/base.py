@@ -19,13 +19,10 @@ from ..errors import ConfigError
 from ..sim.params import ParamConfig, ParamSpec
 
 ASSETS = Path(__file__).parent / "assets"
-# what mjx_tuning may change: solver iterations and line-search iterations (MjOption), the integrator,
-# the Euler damping flag, MJX's contact caps (custom numerics it reads: contacts per geom pair, geom
-# pairs per collision function), and the smallest geom condim (MJX has no frictionless contacts with
-# elliptic cones)
-_INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
-                "rk4": mujoco.mjtIntegrator.mjINT_RK4}
-MJX_TUNING = ("iterations", "ls_iterations", "integrator", "eulerdamp", "max_contact_points", "max_geom_pairs", "min_condim")
+# what mjx_tuning may change: solver iterations and line-search iterations (MjOption), MJX's contact
+# caps (custom numerics it reads: contacts per geom pair, geom pairs per collision function), and the
+# smallest geom condim (MJX has no frictionless contacts with elliptic cones)
+MJX_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim")
 
 
 @dataclasses.dataclass
@@ -53,8 +50,6 @@ class TaskConfig:
             low, high = self.parameters[name].range
             if not low <= value <= high:
                 raise ConfigError(f"real_params.{name}={value} lies outside its range [{low}, {high}]")
-        if self.mjx_tuning.get("integrator", "euler") not in _INTEGRATORS:
-            raise ConfigError(f"mjx_tuning.integrator={self.mjx_tuning['integrator']!r}; allowed: {', '.join(_INTEGRATORS)}")
         unknown = set(self.mjx_tuning) - set(MJX_TUNING)
         if unknown:
             raise ConfigError(f"mjx_tuning: unknown keys {sorted(unknown)}; allowed: {', '.join(MJX_TUNING)}")
@@ -98,10 +93,6 @@ class Task:
         for key in ("iterations", "ls_iterations"):
             if key in tuning:
                 setattr(spec.option, key, int(tuning[key]))
-        if "integrator" in tuning:
-            spec.option.integrator = _INTEGRATORS[tuning["integrator"]]
-        if "eulerdamp" in tuning and not tuning["eulerdamp"]:
-            spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
         for geom in spec.geoms if "min_condim" in tuning else ():
             geom.condim = max(geom.condim, int(tuning["min_condim"]))
         for key in ("max_contact_points", "max_geom_pairs"):
@@ -121,9 +112,9 @@ class Task:
     def real_values(self) -> np.ndarray:
         return np.array([self.cfg.real_params[n] for n in self.spec.names])
 
-    def ctrl(self, action: np.ndarray) -> np.ndarray:
-        """Normalised actions in [-1, 1] -> actuator controls in the ctrlrange."""
-        return self._ctrl_mid + self._ctrl_half * np.clip(action, -1.0, 1.0)
+    def ctrl(self, action: Any, xp: Any = np) -> Any:
+        """Normalised actions in [-1, 1] -> actuator controls in the ctrlrange (xp: the backend's array namespace)."""
+        return self._ctrl_mid + self._ctrl_half * xp.clip(action, -1.0, 1.0)
 
     # hooks, batched over environments ------------------------------------------------
     def reset_state(self, rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:

@@ -206,7 +206,7 @@ def _closed_form_obstacle(conditionals, prior, prior_power: float, corrected: li
     return None
 
 
-def _ratio_natural(prior, prior_power: float, corrected: list, dim: int, tau: float = 1.0):
+def _ratio_natural(prior, prior_power: float, corrected: list, dim: int, tau: float):
     """Natural parameters (lam, eta) of p^prior_power / prod p~_i^tau, or (None, None) if constant."""
     lam = torch.zeros(dim, dim, dtype=torch.float64)
     eta = torch.zeros(dim, dtype=torch.float64)

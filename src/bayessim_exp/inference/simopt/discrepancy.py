@@ -102,10 +102,6 @@ class Discrepancy:
             log.warning("discrepancy: real %s never varies; compared unnormalised", ", ".join(flat))
         self.scale = torch.where(spread > 0, spread, torch.ones_like(spread))
 
-    @property
-    def num_real(self) -> int:
-        return self.real.shape[0]
-
     def __call__(self, sim_states: torch.Tensor) -> torch.Tensor:
         """sim_states [N, M, T+1, S]: sample i rolled out from real trajectory j's start -> cost [N]."""
         m, t1 = self.real.shape[:2]

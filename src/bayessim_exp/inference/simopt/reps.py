@@ -79,14 +79,6 @@ class RepsWeights:
     kl: float  # KL(weights || uniform) <= epsilon
 
 
-def dual(costs: torch.Tensor, temperature: float, epsilon: float) -> float:
-    """The REPS dual g(eta) for costs [N] (minimised over eta > 0 by the temperature)."""
-    c = costs.double()
-    shifted = -(c - c.min()) / temperature  # shift by the best cost: exp never overflows
-    log_mean = torch.logsumexp(shifted, 0) - math.log(len(c))
-    return float(temperature * epsilon + temperature * log_mean - c.min())
-
-
 def weights_at(costs: torch.Tensor, temperature: float) -> tuple[torch.Tensor, float]:
     """p_i ∝ exp(-c_i / eta) and KL(p || uniform)."""
     log_p = torch.log_softmax(-(costs.double() - costs.min()) / temperature, 0)

@@ -79,7 +79,8 @@ class FixedPolicyConfig:
 
 
 class FixedPolicy:
-    """offset + amplitude * sin(phase(t)): phase 0 for constant, 2 pi f t for sine, a linear sweep for chirp."""
+    """offset + amplitude * sin(angle(t)): constant = offset + amplitude (phase unused), sine: 2 pi f t + phase,
+    chirp: a linear frequency sweep + phase."""
 
     def __init__(self, cfg: FixedPolicyConfig, action_dim: int, control_dt: float):
         def per_dim(name: str) -> torch.Tensor:

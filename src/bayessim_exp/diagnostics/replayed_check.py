@@ -7,9 +7,10 @@ difference divided by s, the per-feature spread of the prior's replays.
 
 Per trajectory the check reports the median distance of the real trajectory to the posterior's and
 to the prior's replays, and a predictive p-value: with D(y) = mean distance of y to the posterior
-replays, p = (1 + #{j : D(replay_j) >= D(real)}) / (num + 1), D(replay_j) taken over the other
-replays. If the real trajectory were a draw from the posterior predictive it would be exchangeable
-with the replays and p would be uniform (in steps of 1 / (num + 1)); a small p means the real
+replays, p = (1 + #{j : D(replay_j) >= D(real)}) / (m + 1), D(replay_j) taken over the other
+replays, m the replays that did not diverge (at most num). If the real trajectory were a draw from
+the posterior predictive it would be exchangeable with the replays and p would be uniform (in steps
+of 1 / (m + 1)); a small p means the real
 trajectory lies farther from every posterior draw than posterior draws lie from each other.
 
 Simulations are deterministic and no model is exact, so once the posterior is narrow a small p alone

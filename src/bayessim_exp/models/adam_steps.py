@@ -1,10 +1,9 @@
 """Adam steps over the batches of an epoch, eagerly on a CPU and replayed from a CUDA graph on a GPU.
 
-A density network's step is a few hundred small kernels; launching them one by one from Python
-leaves a GPU idle most of the time (on the lent H100 machine an eager GPU epoch was slower than the
-CPU's). Captured once into a CUDA graph, a step is one launch (a whole epoch in one graph measured
-slower: a graph's launch cost grows with its nodes).
-The graphed step reads its rows through a fixed index buffer, so every batch has the same size: the
+A density network's step is many small kernels; launched one by one from Python they leave a GPU
+idle most of the time (on the lent H100 machine an eager GPU epoch was slower than the CPU's).
+Captured once into a CUDA graph, a step is one launch (a whole epoch in one graph measured slower,
+docs/benchmarks.md). The graphed step reads its rows through a fixed index buffer, so every batch has the same size: the
 last batch of an epoch is filled up with rows from the epoch's start.
 
 Both keep the first non-finite loss or gradient on the device, read once per epoch: a read per step

@@ -111,7 +111,7 @@ class MDNN(StandardizedDensityModel):
                                   **({} if self.projection is None else {"projection": self.projection})})
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
-        # the mean of the members' own losses: each member is trained as if alone
+        # the mean of the members' own losses: each member has its own gradients (early stopping is shared)
         h = self.embedding(x_std)
         return torch.stack([mixture_nll(*member(h), theta_std) for member in self.members]).mean(0)
 

@@ -1,7 +1,7 @@
 """rl=ppo: each round trains PPO on simulators randomized with the round's distribution, then evaluates
 the policy on the surrogate real system.
 
-Stages (run by the pipeline after the round's condition stage, each saved as round_NNN/<name>.pt):
+Stages (run by the pipeline after the round's score stage, each saved as round_NNN/<name>.pt):
   train_policy  PPO for rl.train.total_steps steps on `train_on` (posterior | prior | nominal); with
                 `finetune` it continues the previous round's policy, optimiser and normaliser
   evaluate      returns of the deterministic policy on the surrogate real parameters (mean/min/max into

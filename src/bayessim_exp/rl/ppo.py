@@ -1,8 +1,8 @@
 """PPO with torchrl (Collector, GAE, ClipPPOLoss) on a SimulatorEnv, resumable from a state dict.
 
-One `train` call collects `total_steps` environment steps in batches of num_envs x rollout_steps;
-after each batch the observation normaliser takes the batch's statistics, GAE computes advantages
-and the clipped objective is minimised for `epochs` passes over shuffled minibatches.
+One `train` call collects `total_steps` environment steps (rounded down to whole batches) in batches of
+num_envs x rollout_steps; after each batch the observation normaliser takes the batch's statistics,
+GAE computes advantages and the clipped objective is minimised for `epochs` passes over shuffled minibatches.
 """
 
 from __future__ import annotations

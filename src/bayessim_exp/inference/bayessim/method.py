@@ -133,7 +133,7 @@ class BayesSim(InferenceMethod):
         model = self.comp.model()
         if r > 1 and self.cfg.finetune:
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
-        # trained where the summaries were made: the training set stays on the GPU with device=cuda
+        # trained on the run's device (summaries are stored on the CPU; with device=cuda they are copied there)
         dev = self.comp.device
         history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}")
         ctx.tb.losses(r, history)

@@ -7,7 +7,7 @@ Per (task, method), over the seeds of finished runs, for the last round: the err
 parameters (mean over parameters of |mean - true| / prior range), the log density at the true
 parameters and its gain over the prior, the real roll-outs used, simulated roll-outs, and the wall time
 of the run (from its config.yaml, written at the start, to its results.json, rewritten after every round:
-stage seconds in results.json leave out stages whose artifacts were deleted, such as BayesSim's collect).
+start-up and writing included, which the stage seconds in results.json leave out).
 Prints mean ± sd over seeds, then each seed's value.
 """
 

@@ -91,9 +91,11 @@ class Pipeline:
             ctx = RoundContext(self.comp, self.run_dir, r, self.rc.seed, self.tb)
             seconds = {}
             for stage in self.stages:
-                if run_stage(ctx, stage) and stop_after == (r, stage.name):
-                    return results
-            self._shrink_transients(ctx)
+                if run_stage(ctx, stage):
+                    self._shrink_transients(ctx)
+                    if stop_after == (r, stage.name):
+                        return results
+            self._shrink_transients(ctx)  # also what a run killed before its shrink left in a resumed round
             for stage in self.stages:
                 if self.run_dir.has(r, stage.name):
                     seconds[stage.name] = round(float(ctx.output(stage.name)["seconds"]), 3)
@@ -106,9 +108,11 @@ class Pipeline:
         return results
 
     def _shrink_transients(self, ctx: RoundContext) -> None:
-        """At the end of a round (also a resumed one) every transient artifact shrinks to its timing."""
+        """A transient artifact shrinks to its timing once every stage that reads it has finished."""
         for stage in self.stages:
-            if stage.transient and set(ctx.output(stage.name)) != {"seconds"}:
+            readers = [s.name for s in self.stages if stage.name in s.inputs]
+            if (stage.transient and all(self.run_dir.has(ctx.round, n) for n in [stage.name, *readers])
+                    and set(ctx.output(stage.name)) != {"seconds"}):
                 shrunk = {"seconds": ctx.output(stage.name)["seconds"]}
                 self.run_dir.save(ctx.round, stage.name, shrunk)
                 ctx.remember(stage.name, shrunk)

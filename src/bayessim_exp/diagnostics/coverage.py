@@ -18,16 +18,33 @@ from collections.abc import Sequence
 
 import torch
 
+_CHUNK_ELEMENTS = 1 << 22  # numbers held per chunk of held-out pairs (batched models)
+
+
+def _chunks(count: int, per_pair: int) -> tuple[torch.Tensor, ...]:
+    return torch.arange(count).split(max(1, _CHUNK_ELEMENTS // per_pair))
+
 
 @torch.no_grad()
 def credibility_ranks(model, theta: torch.Tensor, x: torch.Tensor, num_samples: int = 1000,
                       seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
     """Per held-out pair: the HPD level at which theta_i enters ([N]) and its marginal ranks ([N, D]),
-    both fractions of `num_samples` posterior draws of model.conditional(x_i)."""
+    both fractions of `num_samples` posterior draws of q(theta | x_i). Models with `conditionals`
+    (batched mixtures) are checked many pairs at a time; others pair by pair."""
+    theta = theta.double()
+    if hasattr(model, "conditionals"):
+        generator = torch.Generator().manual_seed(seed)
+        hpd, marginal = [], []
+        for rows in _chunks(len(theta), num_samples * theta.shape[1]):  # draws per pair
+            q = model.conditionals(x[rows])
+            draws = q.sample(num_samples, generator)  # [S, n, D]
+            hpd.append((q.log_prob(draws) > q.log_prob(theta[rows])).double().mean(0))
+            marginal.append((draws < theta[rows]).double().mean(0))
+        return torch.cat(hpd), torch.cat(marginal)
     hpd, marginal = [], []
     with torch.random.fork_rng():
         torch.manual_seed(seed)
-        for theta_i, x_i in zip(theta.double(), x):
+        for theta_i, x_i in zip(theta, x):
             q = model.conditional(x_i)
             draws = q.sample((num_samples,)).double()
             hpd.append((q.log_prob(draws) > q.log_prob(theta_i[None])).double().mean())
@@ -54,6 +71,10 @@ def held_out_gain(model, theta: torch.Tensor, x: torch.Tensor, prior) -> float:
     beyond the prior (nats; negative: less than the prior). q is the model's conditional before any
     truncation to the prior's box, which can only raise it: a lower bound for models in parameter units,
     exact in probit space."""
-    gains = [float(model.conditional(x_i).log_prob(theta_i.double()[None])[0] - prior.log_prob(theta_i.double()[None])[0])
-             for theta_i, x_i in zip(theta, x)]
-    return sum(gains) / len(gains)
+    theta = theta.double()
+    if hasattr(model, "conditionals"):
+        d = theta.shape[1]  # per pair: the precision factors of up to 16 components
+        log_q = torch.cat([model.conditionals(x[rows]).log_prob(theta[rows]) for rows in _chunks(len(theta), 16 * d * d)])
+    else:
+        log_q = torch.stack([model.conditional(x_i).log_prob(theta_i[None])[0] for theta_i, x_i in zip(theta, x)])
+    return float((log_q - prior.log_prob(theta)).mean())

@@ -42,6 +42,40 @@ def _cholesky(covs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     raise ValueError("a mixture component's covariance is not positive definite, even with jitter")
 
 
+class MixtureBatch:
+    """One Gaussian mixture per row n, for many rows at once (a model's q(theta | x_n) on held-out
+    summaries): log weights [N, M], means [N, M, D], upper-triangular precision factors U [N, M, D, D]
+    with cov = (U^T U)^-1, float64. Loops over components, never over rows."""
+
+    def __init__(self, log_weights: torch.Tensor, means: torch.Tensor, precision_factors: torch.Tensor):
+        self.log_weights = torch.log_softmax(log_weights.double(), -1)
+        self.means, self.factors = means.double(), precision_factors.double()
+
+    def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
+        """log q_n(theta[..., n, :]) for theta [..., N, D]: [..., N]."""
+        theta = theta.double()
+        half_logdet = torch.log(torch.diagonal(self.factors, dim1=-2, dim2=-1)).sum(-1)  # [N, M]
+        per_component = []
+        for m in range(self.means.shape[1]):
+            z = torch.einsum("nij,...nj->...ni", self.factors[:, m], theta - self.means[:, m])
+            per_component.append(half_logdet[:, m] - 0.5 * (z**2).sum(-1))
+        d = self.means.shape[-1]
+        return torch.logsumexp(self.log_weights + torch.stack(per_component, -1), -1) - 0.5 * d * _LOG_2PI
+
+    def sample(self, count: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        """`count` draws from every row's mixture: [count, N, D]."""
+        n, k, d = self.means.shape
+        comp = torch.multinomial(self.log_weights.exp(), count, replacement=True, generator=generator).T  # [count, N]
+        eps = torch.randn(count, n, d, dtype=torch.float64, generator=generator)
+        out = torch.zeros(count, n, d, dtype=torch.float64)
+        eye = torch.eye(d, dtype=torch.float64)
+        for m in range(k):
+            factor_inv = torch.linalg.solve_triangular(self.factors[:, m], eye.expand(n, d, d), upper=True)
+            draws = self.means[:, m] + torch.einsum("nij,cnj->cni", factor_inv, eps)
+            out = torch.where((comp == m)[..., None], draws, out)
+        return out
+
+
 class GaussianMixture(ParameterDistribution):
     """sum_k w_k N(mean_k, cov_k) over R^D, float64."""
 

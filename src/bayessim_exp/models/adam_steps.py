@@ -30,7 +30,9 @@ class EagerAdamSteps:
         dev = theta.device
         self.nll, self.theta, self.x, self.batch_size, self.label = nll, theta, x, cfg.batch_size, label
         self.params = [p for p in net.parameters() if p.requires_grad]
-        self.opt = torch.optim.Adam(self.params, lr=cfg.lr, weight_decay=cfg.weight_decay, capturable=capturable)
+        # on a GPU the fused Adam: one kernel for every parameter's update instead of several per tensor
+        self.opt = torch.optim.Adam(self.params, lr=cfg.lr, weight_decay=cfg.weight_decay, capturable=capturable,
+                                    fused=True if capturable else None)
         self.step = torch.zeros((), dtype=torch.long, device=dev)
         self.bad_loss_step = torch.full((), -1, dtype=torch.long, device=dev)
         self.bad_grad_step = torch.full((), -1, dtype=torch.long, device=dev)

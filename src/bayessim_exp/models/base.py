@@ -36,6 +36,7 @@ class TrainConfig:
     val_fraction: float
     weight_decay: float
     project_inputs: bool  # replace the summaries by ridge predictions of the parameters (models/projection.py)
+    calibrate: bool  # rescale the fitted posterior's spread per parameter on the validation split (mixtures)
 
     def validate(self) -> None:
         if self.lr <= 0 or self.batch_size < 1 or self.max_epochs < 1 or self.patience < 1:
@@ -85,6 +86,10 @@ class StandardizedDensityModel:
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
+    def _calibrate(self, theta_std: torch.Tensor, inputs: torch.Tensor) -> list[float]:
+        """Fit the spread of q on validation pairs (cfg.calibrate); returns the factors per parameter."""
+        raise NotImplementedError
+
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
         """Trains where `x` lives (a GPU when the pipeline runs with device=cuda); the fitted network
         goes back to the CPU, where its state is saved and the posteriors are built."""
@@ -102,8 +107,12 @@ class StandardizedDensityModel:
             if inputs is None:
                 with torch.no_grad():
                     inputs = self._inputs(x)
-            history = train_density(self.net, self._nll, self.theta_norm(theta), inputs, self.cfg,
+            theta_std = self.theta_norm(theta)
+            history = train_density(self.net, self._nll, theta_std, inputs, self.cfg,
                                     seed=seed, label=label, on_epoch=on_epoch)
+            if self.cfg.calibrate:
+                val_idx = validation_split(len(theta), self.cfg.val_fraction, seed, label)[0].to(x.device)
+                history["spread_scale"] = self._calibrate(theta_std[val_idx], inputs[val_idx])
         finally:
             self.net.to("cpu")
         self.fitted = True
@@ -115,6 +124,16 @@ class StandardizedDensityModel:
     def load_state_dict(self, state: dict) -> None:
         self.net.load_state_dict(state["net"])
         self.fitted = state["fitted"]
+
+
+def validation_split(n: int, val_fraction: float, seed: int, label: str) -> tuple[torch.Tensor, torch.Tensor, torch.Generator]:
+    """(validation indices, training indices, the generator that drew them, for the epochs' orders)."""
+    g = torch.Generator().manual_seed(seed)
+    n_val = max(1, int(round(val_fraction * n)))
+    if n - n_val < 2:
+        raise TrainingError(f"{label}: {n} simulations are too few to train on")
+    perm = torch.randperm(n, generator=g)
+    return perm[:n_val], perm[n_val:], g
 
 
 def train_density(
@@ -136,13 +155,8 @@ def train_density(
     """
     from tqdm.auto import tqdm
 
-    g = torch.Generator().manual_seed(seed)
-    n = theta.shape[0]
-    n_val = max(1, int(round(cfg.val_fraction * n)))
-    if n - n_val < 2:
-        raise TrainingError(f"{label}: {n} simulations are too few to train on")
-    perm = torch.randperm(n, generator=g)
-    val_idx, train_idx = perm[:n_val].to(theta.device), perm[n_val:]
+    val_idx, train_idx, g = validation_split(theta.shape[0], cfg.val_fraction, seed, label)
+    val_idx = val_idx.to(theta.device)
     steps = adam_steps(net, nll, theta, x, cfg, label)
     best, best_state, since_best = math.inf, None, 0
     history: dict[str, list[float]] = {"train": [], "val": []}

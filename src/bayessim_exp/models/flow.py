@@ -32,6 +32,9 @@ class FlowConfig(TrainConfig):
 
     def validate(self) -> None:
         super().validate()
+        if self.calibrate:
+            raise ConfigError("calibrate rescales Gaussian mixture components (mdnn, mdrff); a flow has none: "
+                              "set model.calibrate=false")
         if self.transforms < 1 or self.bins < 2:
             raise ConfigError(f"transforms must be >= 1 and bins >= 2, got {self.transforms}, {self.bins}")
         if not self.hidden or any(h < 1 for h in self.hidden):

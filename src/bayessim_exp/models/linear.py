@@ -13,7 +13,7 @@ import dataclasses
 
 import torch
 
-from ..distributions.mixture import GaussianMixture
+from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError, TrainingError
 from ..registry import register
 from .projection import RidgeSystem
@@ -74,6 +74,14 @@ class LinearGaussian:
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
         z = (x_obs.double().reshape(1, -1) - self.shift) / self.scale
         return GaussianMixture(torch.zeros(1), _predict(z, self.weights), self.cov[None])
+
+    @torch.no_grad()
+    def conditionals(self, x: torch.Tensor) -> MixtureBatch:
+        """q(theta | x_n) for every row of x [N, F] (held-out checks, batched)."""
+        means = _predict((x.double() - self.shift) / self.scale, self.weights)
+        factor = torch.linalg.cholesky(torch.linalg.inv(self.cov), upper=True)
+        n, d = means.shape
+        return MixtureBatch(torch.zeros(n, 1), means[:, None], factor.expand(n, 1, d, d))
 
     def state_dict(self) -> dict:
         return {"shift": self.shift, "scale": self.scale, "weights": self.weights, "cov": self.cov}

@@ -7,6 +7,11 @@ exp), so that log N(theta; mu, (U^T U)^-1) = sum log diag U - |U (theta - mu)|^2
 `ensemble` > 1: that many networks from different initialisations, each trained on its own
 negative log-likelihood (in one loop, on the same batches), and q is their equally weighted
 average, itself a Gaussian mixture (docs/statistics.md: averaging corrects overconfidence).
+
+`calibrate`: after training, one factor per parameter on the standard deviations of every
+component (in standardised units), fitted by maximum likelihood on the validation split. A network
+stopped early is over- or under-dispersed, by different amounts per parameter; rescaling is
+temperature scaling (Guo et al. 2017) per output, and it can only raise the validation likelihood.
 """
 
 from __future__ import annotations
@@ -17,12 +22,14 @@ import math
 import torch
 from torch import nn
 
-from ..distributions.mixture import GaussianMixture
+from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError
 from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
 from .projection import RidgeProjection
 
+_CALIBRATION_ROWS = 4096  # validation pairs the spread is fitted on (plenty for one factor per parameter)
+_CALIBRATION_CHUNK = 512  # pairs per pass: dense precision factors of 100-parameter mixtures are large
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 
 
@@ -79,6 +86,18 @@ class MixtureHead(nn.Module):
         return logits, means.reshape(-1, k, d), U
 
 
+class SpreadScale(nn.Module):
+    """log of the factors on q's standard deviations per standardised parameter (0: as trained)."""
+
+    def __init__(self, dim: int):
+        super().__init__()
+        self.register_buffer("log_scale", torch.zeros(dim))
+
+    def scale_factors(self, U: torch.Tensor, log_scale: torch.Tensor | None = None) -> torch.Tensor:
+        """Precision factors of the rescaled components: U diag(1 / scale), still upper triangular."""
+        return U * torch.exp(-(self.log_scale if log_scale is None else log_scale))
+
+
 def mixture_nll(logits: torch.Tensor, means: torch.Tensor, U: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
     z = (U @ (theta[:, None, :] - means).unsqueeze(-1)).squeeze(-1)
     log_det = torch.log(torch.diagonal(U, dim1=-2, dim2=-1)).sum(-1)
@@ -105,9 +124,9 @@ class MDNN(StandardizedDensityModel):
                 width = h
             head = MixtureHead(width, theta_dim, cfg.components, cfg.covariance == "full")
             self.members.append(nn.Sequential(*layers, head))
-        self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
+        self.x_norm, self.theta_norm, self.spread = Standardizer(x_dim), Standardizer(theta_dim), SpreadScale(theta_dim)
         self.net = nn.ModuleDict({"embedding": self.embedding, "members": self.members, "x_norm": self.x_norm,
-                                  "theta_norm": self.theta_norm,
+                                  "theta_norm": self.theta_norm, "spread": self.spread,
                                   **({} if self.projection is None else {"projection": self.projection})})
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
@@ -115,13 +134,53 @@ class MDNN(StandardizedDensityModel):
         h = self.embedding(x_std)
         return torch.stack([mixture_nll(*member(h), theta_std) for member in self.members]).mean(0)
 
+    def _mixtures(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The members' mixtures side by side, equally weighted: log weights [N, M], means [N, M, D],
+        precision factors [N, M, D, D] (standardised units, before the spread calibration)."""
+        h = self.embedding(inputs)
+        parts = [member(h) for member in self.members]
+        log_w = torch.cat([torch.log_softmax(lg, -1) for lg, _, _ in parts], -1) - math.log(len(parts))
+        return log_w, torch.cat([mu for _, mu, _ in parts], 1), torch.cat([u for _, _, u in parts], 1)
+
+    def _calibrate(self, theta_std: torch.Tensor, inputs: torch.Tensor) -> list[float]:
+        self.spread.log_scale.zero_()
+        self.net.eval()
+        rows = torch.arange(min(len(theta_std), _CALIBRATION_ROWS), device=theta_std.device).split(_CALIBRATION_CHUNK)
+        with torch.no_grad():  # the network is fixed: its outputs once, the factors by L-BFGS on them
+            outputs = [(theta_std[r], *self._mixtures(inputs[r])) for r in rows]
+        log_scale = torch.zeros_like(self.spread.log_scale, requires_grad=True)
+        optimizer = torch.optim.LBFGS([log_scale], max_iter=100, line_search_fn="strong_wolfe")
+        count = sum(len(t) for t, *_ in outputs)
+
+        def closure() -> torch.Tensor:
+            optimizer.zero_grad()
+            total = 0.0
+            for theta, log_w, means, U in outputs:
+                loss = mixture_nll(log_w, means, self.spread.scale_factors(U, log_scale), theta).sum() / count
+                loss.backward()
+                total += loss.detach()
+            return total
+
+        optimizer.step(closure)
+        if torch.isfinite(log_scale).all():  # else keep the network's own spread
+            self.spread.log_scale.copy_(log_scale.detach())
+        return torch.exp(self.spread.log_scale).tolist()
+
+    @torch.no_grad()
+    def conditionals(self, x: torch.Tensor) -> MixtureBatch:
+        """q(theta | x_n) in parameter units for every row of x [N, F] (held-out checks, batched)."""
+        self.net.eval()
+        log_w, means, U = self._mixtures(self._inputs(x.float()))
+        shift, scale = self.theta_norm.shift.double(), self.theta_norm.scale.double()
+        # theta = shift + scale * theta_std: the precision factors divide by the scale, column by column
+        return MixtureBatch(log_w, means.double() * scale + shift, self.spread.scale_factors(U).double() / scale)
+
     @torch.no_grad()
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
         """q(theta | x_obs) in parameter units, for one summary x_obs [F]: the members' mixtures, equally weighted."""
         self.net.eval()
-        h = self.embedding(self._inputs(x_obs.float().reshape(1, -1)))
-        logits, means, U = (torch.cat(parts) for parts in zip(*[
-            (torch.log_softmax(lg[0].double(), -1), mu[0], u[0]) for lg, mu, u in (member(h) for member in self.members)]))
+        log_w, means, U = (part[0] for part in self._mixtures(self._inputs(x_obs.float().reshape(1, -1))))
+        logits, U = log_w.double(), self.spread.scale_factors(U)
         eye = torch.eye(self.theta_dim, dtype=torch.float64)
         U_inv = torch.linalg.solve_triangular(U.double(), eye.expand_as(U), upper=True)
         covs = U_inv @ U_inv.transpose(-1, -2)

@@ -22,7 +22,7 @@ from torch import nn
 from ..errors import ConfigError
 from ..registry import register
 from .base import Standardizer, TrainConfig
-from .mdnn import ACTIVATIONS, MDNN, MixtureHead, input_projection
+from .mdnn import ACTIVATIONS, MDNN, MixtureHead, SpreadScale, input_projection
 
 # kernel name -> degrees of freedom of the Student-t spectral density (None: Gaussian, the RBF)
 KERNELS = {"rbf": None, "matern12": 1.0, "matern32": 3.0, "matern52": 5.0}
@@ -100,9 +100,9 @@ class MDRFF(MDNN):
         self.embedding = nn.Sequential(self.embedding, self.rff)
         self.members = nn.ModuleList([nn.Sequential(*layers, MixtureHead(width, theta_dim, cfg.components,
                                                                          cfg.covariance == "full"))])
-        self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
+        self.x_norm, self.theta_norm, self.spread = Standardizer(x_dim), Standardizer(theta_dim), SpreadScale(theta_dim)
         self.net = nn.ModuleDict({"embedding": self.embedding, "members": self.members, "x_norm": self.x_norm,
-                                  "theta_norm": self.theta_norm,
+                                  "theta_norm": self.theta_norm, "spread": self.spread,
                                   **({} if self.projection is None else {"projection": self.projection})})
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:

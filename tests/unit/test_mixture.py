@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from bayessim_exp.distributions.base import ParameterDistribution
-from bayessim_exp.distributions.mixture import GaussianMixture, TruncatedMixture
+from bayessim_exp.distributions.mixture import GaussianMixture, MixtureBatch, TruncatedMixture
 
 
 def gaussian(mean, cov):
@@ -79,3 +79,20 @@ def test_covariance_left_indefinite_by_rounding_is_repaired_with_a_small_jitter(
     torch.testing.assert_close(mix.covs, cov, rtol=1e-3, atol=0)
     with pytest.raises(ValueError, match="not finite"):
         GaussianMixture(torch.zeros(1), torch.zeros(1, 3), torch.full((1, 3, 3), float("inf")))
+
+
+def test_a_batch_of_mixtures_matches_its_rows_one_by_one():
+    g = torch.Generator().manual_seed(0)
+    n, k, d = 4, 3, 3
+    factors = torch.triu(torch.randn(n, k, d, d, generator=g, dtype=torch.float64), 1) \
+        + torch.diag_embed(torch.rand(n, k, d, generator=g, dtype=torch.float64) + 0.5)
+    batch = MixtureBatch(torch.randn(n, k, generator=g), torch.randn(n, k, d, generator=g), factors)
+    inverse = torch.linalg.inv(factors)
+    rows = [GaussianMixture(batch.log_weights[i], batch.means[i], inverse[i] @ inverse[i].transpose(-1, -2)) for i in range(n)]
+    theta = torch.randn(5, n, d, generator=g, dtype=torch.float64)
+    expected = torch.stack([rows[i].log_prob(theta[:, i]) for i in range(n)], -1)
+    torch.testing.assert_close(batch.log_prob(theta), expected)
+    draws = batch.sample(40000, torch.Generator().manual_seed(1))
+    for i in range(n):
+        torch.testing.assert_close(draws[:, i].mean(0), rows[i].mean, atol=0.05, rtol=0)
+        torch.testing.assert_close(torch.cov(draws[:, i].T), rows[i].covariance, atol=0.1, rtol=0.05)

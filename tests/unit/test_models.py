@@ -148,3 +148,29 @@ def test_nan_in_training_names_the_round_and_step(name):
     model = build("model", {"name": name, **CONFIGS[name], "max_epochs": 2}, theta_dim=2, x_dim=3)
     with pytest.raises(TrainingError, match=r"round 3: (validation )?loss became nan at epoch 0, step \d+"):
         model.fit(theta, x, seed=0, label="round 3")
+
+
+@pytest.mark.parametrize("name", ["mdnn", "mdrff"])
+def test_calibration_recovers_a_known_spread_factor(name):
+    """Pairs drawn from the model's own q(theta | x) give factors near 1; the same draws at twice their
+    distance from q's mean (one component: q's mean is exact), factors near 2 (sampling error ~0.03)."""
+    model = _fit(name, gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 4000, seed=0))
+    x = SIM.simulate(gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 3000, seed=7), seed=8).float()
+    own = model.conditionals(x)
+    draws, mean = own.sample(1, torch.Generator().manual_seed(9))[0], own.means[:, 0]
+    for stretch, factor in ((1.0, 1.0), (2.0, 2.0)):
+        theta = (mean + stretch * (draws - mean)).float()
+        before = model.spread.log_scale.clone()
+        model.spread.log_scale.zero_()  # factors relative to the trained network, as fit() calibrates
+        found = torch.tensor(model._calibrate(model.theta_norm(theta), model._inputs(x)))
+        model.spread.log_scale.copy_(before)
+        assert ((found / factor - 1).abs() < 0.1).all(), (stretch, found)
+
+
+def test_fits_from_several_proposals_keep_the_trained_spread():
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 2000, seed=0)
+    model = build("model", {"name": "mdnn", **CONFIGS["mdnn"], "max_epochs": 5}, theta_dim=2, x_dim=3)
+    model.fit(theta, SIM.simulate(theta, seed=1), seed=0, label="test")
+    assert (model.spread.log_scale != 0).all()
+    history = model.fit(theta, SIM.simulate(theta, seed=2), seed=1, label="test", calibrate=False)
+    assert (model.spread.log_scale == 0).all() and "spread_scale" not in history

@@ -16,7 +16,9 @@ from .adam_steps import adam_steps
 
 class PosteriorModel(Protocol):
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "",
-            on_epoch: Callable[[int, float, float], None] | None = None) -> dict: ...
+            on_epoch: Callable[[int, float, float], None] | None = None, calibrate: bool = True) -> dict:
+        """`calibrate=False`: the caller's pairs come from several proposals, where one spread factor per
+        parameter does not fit (models with cfg.calibrate keep the spread they trained to)."""
 
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture: ...
 
@@ -90,7 +92,8 @@ class StandardizedDensityModel:
         """Fit the spread of q on validation pairs (cfg.calibrate); returns the factors per parameter."""
         raise NotImplementedError
 
-    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
+    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
+            calibrate: bool = True) -> dict:
         """Trains where `x` lives (a GPU when the pipeline runs with device=cuda); the fitted network
         goes back to the CPU, where its state is saved and the posteriors are built."""
         theta, x = theta.float().to(x.device), x.float()
@@ -110,9 +113,11 @@ class StandardizedDensityModel:
             theta_std = self.theta_norm(theta)
             history = train_density(self.net, self._nll, theta_std, inputs, self.cfg,
                                     seed=seed, label=label, on_epoch=on_epoch)
-            if self.cfg.calibrate:
-                val_idx = validation_split(len(theta), self.cfg.val_fraction, seed, label)[0].to(x.device)
-                history["spread_scale"] = self._calibrate(theta_std[val_idx], inputs[val_idx])
+            if self.cfg.calibrate:  # fine-tuning starts from the network's own spread, not the last factors
+                self.spread.log_scale.zero_()
+                if calibrate:
+                    val_idx = validation_split(len(theta), self.cfg.val_fraction, seed, label)[0].to(x.device)
+                    history["spread_scale"] = self._calibrate(theta_std[val_idx], inputs[val_idx])
         finally:
             self.net.to("cpu")
         self.fitted = True

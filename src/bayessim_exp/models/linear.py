@@ -45,7 +45,8 @@ class LinearGaussian:
     def _gaussian_nll(self, residual: torch.Tensor, cov: torch.Tensor) -> float:
         return -float(torch.distributions.MultivariateNormal(torch.zeros_like(residual[0]), cov).log_prob(residual).mean())
 
-    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
+    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
+            calibrate: bool = True) -> dict:  # calibrated by construction: the covariance of held-out residuals
         theta, x = theta.double(), x.double()
         n = len(theta)
         n_val = max(1, int(round(self.cfg.val_fraction * n)))

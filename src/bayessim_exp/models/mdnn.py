@@ -143,7 +143,6 @@ class MDNN(StandardizedDensityModel):
         return log_w, torch.cat([mu for _, mu, _ in parts], 1), torch.cat([u for _, _, u in parts], 1)
 
     def _calibrate(self, theta_std: torch.Tensor, inputs: torch.Tensor) -> list[float]:
-        self.spread.log_scale.zero_()
         self.net.eval()
         rows = torch.arange(min(len(theta_std), _CALIBRATION_ROWS), device=theta_std.device).split(_CALIBRATION_CHUNK)
         with torch.no_grad():  # the network is fixed: its outputs once, the factors by L-BFGS on them

@@ -105,12 +105,13 @@ class MDRFF(MDNN):
                                   "theta_norm": self.theta_norm, "spread": self.spread,
                                   **({} if self.projection is None else {"projection": self.projection})})
 
-    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None) -> dict:
+    def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
+            calibrate: bool = True) -> dict:
         if not self.fitted:  # frequencies are drawn once, with the first fit's seed, and then kept
             c = self.cfg
             self.rff.frequencies.copy_(spectral_frequencies(self.feature_in_dim, c.features // 2, c.kernel, c.lengthscale,
                                                             c.quasi_random, seed))
-        return super().fit(theta, x, seed=seed, label=label, on_epoch=on_epoch)
+        return super().fit(theta, x, seed=seed, label=label, on_epoch=on_epoch, calibrate=calibrate)
 
 
 @register("model", "mdrff", MdrffConfig)

@@ -59,7 +59,7 @@ TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, components, 
     "Cartpole": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
     "Ant": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
     "Humanoid": ("corrdiff", "mdnn", "diagonal", True, 1, 1),
-    "ShadowHand": ("corrdiff", "mdnn", "diagonal", True, 5, 3),
+    "ShadowHand": ("corrdiff", "mdnn", "full", True, 1, 3),
     "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True, 5, 3),
 }
 

@@ -18,6 +18,7 @@ from collections.abc import Callable
 import torch
 
 from ..errors import TrainingError
+from .adam import Adam
 
 log = logging.getLogger(__name__)
 
@@ -31,8 +32,7 @@ class EagerAdamSteps:
         self.nll, self.theta, self.x, self.batch_size, self.label = nll, theta, x, cfg.batch_size, label
         self.params = [p for p in net.parameters() if p.requires_grad]
         # on a GPU the fused Adam: one kernel for every parameter's update instead of several per tensor
-        self.opt = torch.optim.Adam(self.params, lr=cfg.lr, weight_decay=cfg.weight_decay, capturable=capturable,
-                                    fused=True if capturable else None)
+        self.opt = Adam(self.params, lr=cfg.lr, weight_decay=cfg.weight_decay, capturable=capturable)
         self.step = torch.zeros((), dtype=torch.long, device=dev)
         self.bad_loss_step = torch.full((), -1, dtype=torch.long, device=dev)
         self.bad_grad_step = torch.full((), -1, dtype=torch.long, device=dev)
@@ -57,7 +57,7 @@ class EagerAdamSteps:
         return list(order.split(self.batch_size))
 
     def _run(self, rows: torch.Tensor) -> None:
-        self.opt.zero_grad(set_to_none=True)
+        self.opt.zero_grad()
         self._step(rows)
 
     def epoch(self, order: torch.Tensor) -> float:
@@ -114,7 +114,7 @@ class GraphedAdamSteps(EagerAdamSteps):
                 super()._run(self.rows)
 
     def _capture(self) -> None:
-        self.opt.zero_grad(set_to_none=True)
+        self.opt.zero_grad()
         graph = torch.cuda.CUDAGraph()
         try:
             # thread_local: JAX's threads may call CUDA meanwhile; only this thread's calls must be capturable

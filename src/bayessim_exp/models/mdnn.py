@@ -19,7 +19,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import torch
+from scipy import optimize
 from torch import nn
 
 from ..distributions.mixture import GaussianMixture, MixtureBatch
@@ -147,22 +149,23 @@ class MDNN(StandardizedDensityModel):
         rows = torch.arange(min(len(theta_std), _CALIBRATION_ROWS), device=theta_std.device).split(_CALIBRATION_CHUNK)
         with torch.no_grad():  # the network is fixed: its outputs once, the factors by L-BFGS on them
             outputs = [(theta_std[r], *self._mixtures(inputs[r])) for r in rows]
-        log_scale = torch.zeros_like(self.spread.log_scale, requires_grad=True)
-        optimizer = torch.optim.LBFGS([log_scale], max_iter=100, line_search_fn="strong_wolfe")
         count = sum(len(t) for t, *_ in outputs)
 
-        def closure() -> torch.Tensor:
-            optimizer.zero_grad()
+        def nll_and_grad(values: np.ndarray) -> tuple[float, np.ndarray]:
+            log_scale = torch.tensor(values, dtype=torch.float32, device=theta_std.device, requires_grad=True)
             total = 0.0
             for theta, log_w, means, U in outputs:
                 loss = mixture_nll(log_w, means, self.spread.scale_factors(U, log_scale), theta).sum() / count
                 loss.backward()
-                total += loss.detach()
-            return total
+                total += loss.item()
+            return total, log_scale.grad.double().cpu().numpy()
 
-        optimizer.step(closure)
+        # scipy's L-BFGS rather than torch.optim's, whose import pulls in torch._dynamo (models/adam.py)
+        found = optimize.minimize(nll_and_grad, np.zeros(self.theta_dim), jac=True, method="L-BFGS-B",
+                                  options={"maxiter": 100})
+        log_scale = torch.as_tensor(found.x, dtype=torch.float32)
         if torch.isfinite(log_scale).all():  # else keep the network's own spread
-            self.spread.log_scale.copy_(log_scale.detach())
+            self.spread.log_scale.copy_(log_scale)
         return torch.exp(self.spread.log_scale).tolist()
 
     @torch.no_grad()

@@ -3,6 +3,7 @@
     python benchmarks/sim_throughput.py [--tasks Pendulum,Humanoid] [--envs 8192,32768] [--horizon 100]
         [--native-envs 8192] [--native-horizon 10] [--baseline-envs 8192,131072] [--json out.json]
         [--compile-only] [--rows mjx-plain,mjx] [--overrides '++task.mjx_tuning.max_geom_pairs=8']
+        [--impl auto|jax|warp]
 
 Env-steps/s counts control steps (each `frame_skip` physics steps; the physics rate is the product)
 over whole `rollout` calls: resets with per-env parameters (set_const on the host where the spec needs
@@ -11,6 +12,7 @@ trajectories handed to torch. Rows per task:
   native      NativeSimulator on all CPU threads, randomized: the baseline in the same run
   mjx-plain   plain MJX on the nominal model with the task's mjx_tuning (vmap(mjx.step) in lax.scan,
               random controls, no task code)
+The MJX rows run the implementation `--impl` resolves to (sim.impl: JAX, or MuJoCo Warp).
   mjx-fixed   MjxSimulator with randomize=False (one model for every slot)
   mjx         MjxSimulator with a parameter set per slot drawn from the prior's box
 "randomization overhead" = 1 - mjx / mjx-fixed at the same size (sizes in --baseline-envs). Each figure is the median of
@@ -34,7 +36,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from bayessim_exp import api, registry  # noqa: E402
-from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, jax_setup  # noqa: E402
+from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, jax_setup, resolve_impl  # noqa: E402
 from bayessim_exp.sim.native import NativeConfig, NativeSimulator  # noqa: E402
 
 
@@ -88,13 +90,11 @@ def simulator_rollouts(task, envs: int, horizon: int, sim, reps: int) -> tuple[f
     return timed(call, reps)
 
 
-def plain_mjx(task, envs: int, horizon: int, reps: int) -> tuple[float, float | None]:
+def plain_mjx(task, envs: int, horizon: int, reps: int, cfg: MjxConfig) -> tuple[float, float | None]:
     import jax
-    from mujoco import mjx
 
-    m = task.mjx_model  # with the task's MJX tuning, as MjxSimulator runs it
-    mx = mjx.put_model(m)
-    data = jax.vmap(lambda _: mjx.make_data(mx))(jax.numpy.arange(envs))
+    sim = MjxSimulator(task, envs, cfg, randomize=False)  # its nominal model, data sizes and implementation
+    m, mx, data, step = sim.mj_model, sim.nominal, sim.data, sim.mjx.step
     lo, hi = jax.numpy.asarray(m.actuator_ctrlrange.T, jax.numpy.float32)
 
     @jax.jit
@@ -102,7 +102,7 @@ def plain_mjx(task, envs: int, horizon: int, reps: int) -> tuple[float, float | 
         def control(d, k):
             ctrl = jax.random.uniform(k, (envs, m.nu), minval=lo, maxval=hi)
             d = d.replace(ctrl=ctrl)
-            d = jax.lax.fori_loop(0, task.frame_skip, lambda _, x: jax.vmap(mjx.step, (None, 0))(mx, x), d)
+            d = jax.lax.fori_loop(0, task.frame_skip, lambda _, x: jax.vmap(step, (None, 0))(mx, x), d)
             return d, d.qpos[:, 0]
         return jax.lax.scan(control, data, jax.random.split(key, horizon))
 
@@ -124,10 +124,12 @@ def main():
     ap.add_argument("--compile-only", action="store_true")
     ap.add_argument("--rows", default="native,mjx-plain,mjx-fixed,mjx",
                     help="which rows (compilation phases split them across processes)")
+    ap.add_argument("--impl", default="auto", help="sim.impl: jax, warp or auto")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     jax = jax_setup(args.cache_dir)
-    cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0, native_below=0)
+    cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0, native_below=0, impl=args.impl)
+    impl = resolve_impl(args.impl)
     reps = 0 if args.compile_only else args.reps
     rows_wanted = set(args.rows.split(","))
     rows = []
@@ -152,7 +154,7 @@ def main():
                        *simulator_rollouts(task, args.native_envs, args.native_horizon, sim, reps))
             baselines = list(map(int, args.baseline_envs.split(",")))
             if "mjx-plain" in rows_wanted:
-                record(task, "mjx-plain", baselines[0], args.horizon, *plain_mjx(task, baselines[0], args.horizon, reps))
+                record(task, "mjx-plain", baselines[0], args.horizon, *plain_mjx(task, baselines[0], args.horizon, reps, cfg))
             for b in baselines if "mjx-fixed" in rows_wanted else []:
                 record(task, "mjx-fixed", b, args.horizon,
                        *simulator_rollouts(task, b, args.horizon, MjxSimulator(task, b, cfg, randomize=False), reps))
@@ -167,11 +169,11 @@ def main():
 
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"device": str(jax.devices()[0]), "torch": torch.__version__, "jax": jax.__version__,
+            json.dump({"device": str(jax.devices()[0]), "impl": impl, "torch": torch.__version__, "jax": jax.__version__,
                        "rows": rows}, f, indent=1)
     if args.compile_only:
         return
-    print(f"\ndevice {jax.devices()[0]}; control steps/s, median of {args.reps} rollouts after a first call")
+    print(f"\ndevice {jax.devices()[0]}, MJX implementation {impl}; control steps/s, median of {args.reps} rollouts after a first call")
     print(f"{'task':<16} {'backend':<10} {'envs':>8} {'env-steps/s':>14} {'vs native':>10} {'randomization overhead':>24}")
     for r in rows:
         if "error" in r:

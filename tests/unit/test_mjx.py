@@ -19,7 +19,8 @@ from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.sim.native import NativeConfig, NativeSimulator
 
 pytest.importorskip("mujoco.mjx")
-from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
+from bayessim_exp.errors import ConfigError  # noqa: E402
+from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, resolve_impl  # noqa: E402
 
 pytestmark = pytest.mark.slow
 NATIVE = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
@@ -41,9 +42,9 @@ def test_mjx_trajectories_match_native(compose, name):
     horizon, tol = CASES[name]
     task = registry.build("task", compose([f"task={name}"]).task)
     params = params_for(task, 3)
-    native = NativeSimulator(task, 3, NATIVE, model=task.mjx_model).rollout(params, RandomPolicy(task.action_dim, 1),
-                                                                          horizon, seed=2)
-    sim = MjxSimulator(task, 3, MJX)
+    sim = MjxSimulator(task, 3, MJX)  # MuJoCo Warp where it is installed and the GPU is NVIDIA's, else JAX
+    native = NativeSimulator(task, 3, NATIVE, model=sim.mj_model).rollout(params, RandomPolicy(task.action_dim, 1),
+                                                                        horizon, seed=2)
     fused = sim.rollout(params, RandomPolicy(task.action_dim, 1), horizon, seed=2)
     assert not native.diverged.any() and not fused.diverged.any()
     torch.testing.assert_close(fused.actions.cpu(), native.actions)
@@ -90,3 +91,22 @@ def test_small_batches_run_on_native_mujoco_with_the_tuned_model(compose):
     small, large = make(task, 4), make(task, 16)
     assert isinstance(small, NativeSimulator) and small.model.opt.iterations == task.mjx_model.opt.iterations != 100
     assert isinstance(large, MjxSimulator)
+
+
+def test_implementation_is_chosen_or_refused_clearly(compose):
+    import jax
+
+    with pytest.raises(ConfigError, match="sim.impl"):
+        MjxConfig(max_abs_qvel=1.0, cache_dir=None, nthread=1, native_below=0, impl="cuda").validate()
+    if not any(d.platform == "gpu" for d in jax.devices()):
+        assert resolve_impl("auto") == resolve_impl("jax") == "jax"
+        with pytest.raises(ConfigError, match="NVIDIA GPU and warp-lang"):
+            resolve_impl("warp")
+    humanoid = registry.build("task", compose(["task=Humanoid"]).task)
+    # MJX's JAX implementation needs condim >= 3 with elliptic cones; MuJoCo Warp simulates the MJCF's
+    assert humanoid.mjx_model.geom_condim.min() == 3 and humanoid.warp_model.geom_condim.min() == 1
+    assert humanoid.warp_buffer("constraints_per_env") == 64  # MuJoCo Warp's default
+    hand = registry.build("task", compose(["task=ShadowHand"]).task)
+    assert hand.warp_buffer("constraints_per_env") == 192 and hand.warp_model.opt.iterations == 5
+    with pytest.raises(ConfigError, match="contacts_per_env"):
+        registry.build("task", compose(["task=Pendulum", "++task.mjx_tuning.contacts_per_env=0"]).task)

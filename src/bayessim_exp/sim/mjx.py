@@ -1,4 +1,7 @@
-"""GPU backend: N MJX (JAX) simulations of one task, each with its own parameters.
+"""GPU backend: N MJX simulations of one task, each with its own parameters.
+
+Two implementations behind MJX's one API (`sim.impl`): MJX's JAX re-implementation of MuJoCo, and MuJoCo
+Warp (NVIDIA GPUs, warp-lang installed), which is several times faster on contact-rich tasks.
 
 Per-environment parameters are batched leaves of one `mjx.Model` (`jax.vmap` with in_axes 0 over the
 fields the ParamSpec touches, None elsewhere). MJX has no `set_const`: when the spec touches a field
@@ -16,6 +19,7 @@ spreads NaNs nor keeps the solver iterating, and it stays flagged until its next
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 from typing import Any
 
@@ -42,6 +46,7 @@ _STATIC_FIELDS = frozenset({"geom_contype", "geom_conaffinity", "geom_condim", "
 # the MjData fields mjx.step reads (MuJoCo's mjSTATE_INTEGRATION); every other field it derives from them
 _STEP_INPUTS = ("time", "qpos", "qvel", "act", "history", "qacc_warmstart", "plugin_state", "ctrl", "qfrc_applied",
                 "xfrc_applied", "eq_active", "mocap_pos", "mocap_quat", "userdata")
+log = logging.getLogger(__name__)
 _PROBES = 8  # random parameter sets (besides the bounds) that decide which derived constants vary
 
 
@@ -51,10 +56,32 @@ class MjxConfig:
     cache_dir: Any  # JAX's persistent compilation cache (str), or None: off
     nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: all)
     native_below: int  # batches smaller than this run on native MuJoCo (the tuned model) on CPU threads
+    impl: str = "auto"  # jax, warp, or auto: warp where warp-lang is installed and the GPU is NVIDIA's
 
     def validate(self) -> None:
         if self.max_abs_qvel <= 0 or self.nthread < 0 or self.native_below < 0:
             raise ConfigError("max_abs_qvel must be > 0, nthread and native_below >= 0")
+        if self.impl not in IMPLS:
+            raise ConfigError(f"sim.impl={self.impl!r} not allowed; allowed: {', '.join(IMPLS)}")
+
+
+IMPLS = ("auto", "jax", "warp")
+
+
+def resolve_impl(impl: str) -> str:
+    """MJX's implementation for `impl` on this machine; warp asked for where it cannot run is an error."""
+    import jax
+
+    nvidia = any(d.platform == "gpu" and "nvidia" in d.device_kind.lower() for d in jax.devices())
+    if impl == "jax" or (impl == "auto" and not nvidia):
+        return "jax"
+    from mujoco.mjx import warp as mjx_warp
+
+    if mjx_warp.WARP_INSTALLED and nvidia:
+        return "warp"
+    if impl == "warp":
+        raise ConfigError("sim.impl=warp needs an NVIDIA GPU and warp-lang (pip install -e '.[warp]')")
+    return "jax"
 
 
 def jax_setup(cache_dir: str | None) -> Any:
@@ -80,6 +107,17 @@ def gpu_visible() -> bool:
     return any(d.platform == "gpu" for d in jax.devices())
 
 
+def _quiet_solver(mx: Any) -> Any:
+    """MuJoCo Warp prints a line per step in which a world reached its solver or line-search
+    iteration cap; the tuned models cap iterations on purpose, and the printing cost more than the steps
+    (measured on the H100). Overflows of the contact and constraint buffers are still reported."""
+    from mujoco.mjx.third_party.mujoco_warp._src.types import OverflowType
+
+    quiet = ~int(OverflowType.ITERATIONS | OverflowType.LS_ITERATIONS)
+    warp_opt = mx.opt._impl
+    return mx.replace(opt=mx.opt.replace(_impl=warp_opt.replace(warn_overflow=warp_opt.warn_overflow & quiet)))
+
+
 def to_torch(x: Any) -> torch.Tensor:
     return torch.from_dlpack(x)
 
@@ -101,7 +139,14 @@ class MjxSimulator(Simulator):
         # (uncommitted first inputs and committed outputs would compile everything twice)
         self._dev = jax.devices()[0]
         m = task.model
-        self.nominal = mjx.put_model(task.mjx_model)  # with the task's MJX tuning
+        self.impl = resolve_impl(cfg.impl)
+        self.mj_model = task.warp_model if self.impl == "warp" else task.mjx_model  # with the task's MJX tuning
+        self.nominal = mjx.put_model(self.mj_model, impl=self.impl)
+        # MuJoCo Warp keeps contacts of all environments in one buffer, constraint rows per environment
+        self._data_sizes = dict(impl="warp", naconmax=num_envs * task.warp_buffer("contacts_per_env"),
+                                njmax=task.warp_buffer("constraints_per_env")) if self.impl == "warp" else {}
+        if self.impl == "warp":
+            self.nominal = _quiet_solver(self.nominal)
         needs_set_const = randomize and task.spec.needs_set_const
         self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if needs_set_const else None
         names = list(task.spec.fields) + self._varying_constants() if randomize else []
@@ -109,13 +154,15 @@ class MjxSimulator(Simulator):
             leaf = _get(self.nominal, name)
             if not isinstance(leaf, jax.Array) or not jax.numpy.issubdtype(leaf.dtype, jax.numpy.floating):
                 raise ConfigError(f"sim=mjx cannot set {name} per simulation: MJX keeps it static")
+            if self.impl == "warp" and not _warp_batchable(name):
+                raise ConfigError(f"sim.impl=warp cannot set {name} per simulation (MuJoCo Warp shares it "
+                                  "between environments); use sim.impl=jax")
         # host copies of every batched leaf, [N, ...]; resets write rows and upload the whole leaf
         self._host = {n: np.repeat(np.asarray(_get(self.nominal, n))[None], num_envs, 0) for n in names}
         self.leaves = {n: self._put(v, _get(self.nominal, n).dtype) for n, v in self._host.items()}
         axes = jax.tree_util.tree_map(lambda _: None, self.nominal)
         self._model_axes = axes.tree_replace({n: 0 for n in names})
-        template = mjx.make_data(self.nominal)
-        self.data = jax.tree_util.tree_map(lambda x: self._put(np.repeat(np.asarray(x)[None], num_envs, 0)), template)
+        self.data = jax.device_put(jax.jit(self._blank)(), self._dev)
         self.obs = self._put(np.zeros((num_envs, task.obs_dim)), np.float32)
         self.broken = self._put(np.zeros(num_envs, bool))  # since the last reset
         self._reset_fn = jax.jit(self._reset_all)
@@ -164,12 +211,20 @@ class MjxSimulator(Simulator):
     def _model(self, leaves: dict) -> Any:
         return self.nominal.tree_replace(leaves)
 
+    def _blank(self) -> Any:
+        """Data of every slot at the model's defaults (vmapped, so MuJoCo Warp sizes its buffers for all)."""
+        return self.jax.vmap(lambda _: self.mjx.make_data(self.mj_model, **self._data_sizes))(
+            self.jnp.arange(self.num_envs))
+
     def _reset_all(self, leaves, data, obs, broken, mask, state):
         """Fresh data with `state` and a forward pass in the slots of `mask`; the others keep theirs."""
         jax, jnp = self.jax, self.jnp
-        fresh = self._fresh(data, state)
+        fresh = self._blank()
+        fresh = fresh.replace(**{k: jnp.asarray(v, getattr(fresh, k).dtype).reshape(getattr(fresh, k).shape)
+                                 for k, v in state.items()})
         fresh = jax.vmap(self.mjx.forward, in_axes=(self._model_axes, 0))(self._model(leaves), fresh)
-        data = _where(jnp, mask, fresh, data)
+        # Data.where merges only the per-slot fields (MuJoCo Warp's contact buffer is shared)
+        data = jax.vmap(lambda d, f, m: d.where(m, f))(data, fresh, mask)
         new_obs = jnp.asarray(self.task.observe(data, xp=jnp), jnp.float32)
         obs = jnp.where(mask[:, None], new_obs, obs)
         return data, obs, broken & ~mask
@@ -191,13 +246,6 @@ class MjxSimulator(Simulator):
         reward = jnp.asarray(self.task.reward(obs, actions, new_obs, xp=jnp), jnp.float32)
         terminated = jnp.asarray(self.task.terminated(new_obs, xp=jnp), bool)
         return data, new_obs, held, reward, terminated, now_broken
-
-    def _fresh(self, data, state):
-        jnp = self.jnp
-        template = self.mjx.make_data(self.nominal)
-        fresh = self.jax.tree_util.tree_map(lambda t, d: jnp.broadcast_to(t, d.shape).astype(d.dtype), template, data)
-        return fresh.replace(**{k: jnp.asarray(v, getattr(data, k).dtype).reshape(getattr(data, k).shape)
-                                for k, v in state.items()})
 
     # the protocol ------------------------------------------------------------------------------
     def _reset(self, params: torch.Tensor, ids: torch.Tensor, state: dict[str, np.ndarray]) -> torch.Tensor:
@@ -277,6 +325,12 @@ def _get(model: Any, name: str) -> Any:
     return getattr(model.opt, name[4:]) if name.startswith("opt.") else getattr(model, name)
 
 
+def _warp_batchable(name: str) -> bool:
+    from mujoco.mjx.warp import types as warp_types
+
+    return bool(warp_types._BATCH_DIM["Model"].get(name[4:] if name.startswith("opt.") else name, False))
+
+
 def _where(jnp: Any, mask: Any, a: Any, b: Any) -> Any:
     """Per slot: a where mask, else b, over every leaf of two batched pytrees."""
     import jax
@@ -290,10 +344,12 @@ def mjx_backend(cfg: MjxConfig):
     trajectories, the model checks' replays) takes less time on CPU threads than compiling MJX for its
     size would; it simulates the same tuned model there."""
     native = NativeConfig(nthread=cfg.nthread, max_abs_qvel=cfg.max_abs_qvel)
+    impl = resolve_impl(cfg.impl)
+    log.info("sim=mjx: MJX implementation %s (sim.impl=%s)", impl, cfg.impl)
 
     def make(task: Task, num_envs: int) -> Simulator:
         if num_envs < cfg.native_below:
-            return NativeSimulator(task, num_envs, native, model=task.mjx_model)
+            return NativeSimulator(task, num_envs, native, model=task.warp_model if impl == "warp" else task.mjx_model)
         return MjxSimulator(task, num_envs, cfg)
 
     return make

@@ -20,9 +20,13 @@ from ..sim.params import ParamConfig, ParamSpec
 
 ASSETS = Path(__file__).parent / "assets"
 # what mjx_tuning may change: solver iterations and line-search iterations (MjOption), MJX's contact
-# caps (custom numerics it reads: contacts per geom pair, geom pairs per collision function), and the
-# smallest geom condim (MJX has no frictionless contacts with elliptic cones)
-MJX_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim")
+# caps (custom numerics it reads: contacts per geom pair, geom pairs per collision function), the
+# smallest geom condim (MJX's JAX implementation has no frictionless contacts with elliptic cones), and
+# MuJoCo Warp's buffers per environment (contacts, constraint rows; what overflows them is dropped)
+MJX_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim",
+              "contacts_per_env", "constraints_per_env")
+# MuJoCo Warp's own default sizes for models without height fields or flexes (mujoco_warp io.py)
+WARP_BUFFERS = {"contacts_per_env": 48, "constraints_per_env": 64}
 
 
 @dataclasses.dataclass
@@ -53,6 +57,9 @@ class TaskConfig:
         unknown = set(self.mjx_tuning) - set(MJX_TUNING)
         if unknown:
             raise ConfigError(f"mjx_tuning: unknown keys {sorted(unknown)}; allowed: {', '.join(MJX_TUNING)}")
+        small = [k for k in WARP_BUFFERS if k in self.mjx_tuning and int(self.mjx_tuning[k]) < 1]
+        if small:
+            raise ConfigError(f"mjx_tuning: {', '.join(small)} must be >= 1")
         if self.control_dt <= 0 or self.episode_length < 1:
             raise ConfigError("control_dt must be > 0 and episode_length >= 1")
 
@@ -85,9 +92,20 @@ class Task:
 
     @functools.cached_property
     def mjx_model(self) -> mujoco.MjModel:
-        """The model sim=mjx simulates: `model` with the task's `mjx_tuning` applied."""
-        tuning = self.cfg.mjx_tuning
-        if not tuning:
+        """The model sim=mjx simulates with MJX's JAX implementation: `model` with the task's `mjx_tuning`."""
+        return self._tuned(self.cfg.mjx_tuning)
+
+    @functools.cached_property
+    def warp_model(self) -> mujoco.MjModel:
+        """The model sim=mjx simulates with MuJoCo Warp: the same tuning less `min_condim` (Warp has
+        frictionless contacts with elliptic cones)."""
+        return self._tuned({k: v for k, v in self.cfg.mjx_tuning.items() if k != "min_condim"})
+
+    def warp_buffer(self, key: str) -> int:
+        return int(self.cfg.mjx_tuning.get(key, WARP_BUFFERS[key]))
+
+    def _tuned(self, tuning: dict[str, Any]) -> mujoco.MjModel:
+        if not set(tuning) - set(WARP_BUFFERS):
             return self.model
         spec = mujoco.MjSpec.from_file(str(ASSETS / self.xml))
         for key in ("iterations", "ls_iterations"):

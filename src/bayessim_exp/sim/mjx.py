@@ -149,7 +149,13 @@ class MjxSimulator(Simulator):
             self.nominal = _quiet_solver(self.nominal)
         needs_set_const = randomize and task.spec.needs_set_const
         self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if needs_set_const else None
-        names = list(task.spec.fields) + self._varying_constants() if randomize else []
+        derived = self._varying_constants() if randomize else []
+        if self.impl == "warp":  # MuJoCo Warp keeps some derived constants (dof_M0) one for all worlds
+            shared = [n for n in derived if not _warp_batchable(n)]
+            if shared:
+                log.info("sim.impl=warp: %s stay nominal in every slot (MuJoCo Warp does not batch them)", shared)
+            derived = [n for n in derived if n not in shared]
+        names = list(task.spec.fields) + derived if randomize else []
         for name in names:
             leaf = _get(self.nominal, name)
             if not isinstance(leaf, jax.Array) or not jax.numpy.issubdtype(leaf.dtype, jax.numpy.floating):

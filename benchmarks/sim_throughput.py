@@ -6,9 +6,9 @@
         [--impl auto|jax|warp]
 
 Env-steps/s counts control steps (each `frame_skip` physics steps; the physics rate is the product)
-over whole `rollout` calls: resets with per-env parameters (set_const on the host where the spec needs
-it), the open-loop random policy's actions, observations, rewards, divergence checks and the
-trajectories handed to torch. Rows per task:
+over whole `rollout` calls: resets with per-env parameters (fields and derived constants computed on
+the device, mjx_constants; benchmarks/reset_cost.py splits a reset's cost), the open-loop random
+policy's actions, observations, rewards, divergence checks and the trajectories handed to torch. Rows per task:
   native      NativeSimulator on all CPU threads, randomized: the baseline in the same run
   mjx-plain   plain MJX on the nominal model with the task's mjx_tuning (vmap(mjx.step) in lax.scan,
               random controls, no task code)

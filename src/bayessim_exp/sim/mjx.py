@@ -4,11 +4,13 @@ Two implementations behind MJX's one API (`sim.impl`): MJX's JAX re-implementati
 Warp (NVIDIA GPUs, warp-lang installed), which is several times faster on contact-rich tasks.
 
 Per-environment parameters are batched leaves of one `mjx.Model` (`jax.vmap` with in_axes 0 over the
-fields the ParamSpec touches, None elsewhere). MJX has no `set_const`: when the spec touches a field
-that mj_setConst reads (mass, inertia, geometry, ...), the derived constants are computed on the host
-with `mujoco.batch` for exactly the slots being reset, and those of them that change within the
-prior's range are batched too. Observations, rewards and terminations are the task's own array code,
-run with xp=jax.numpy inside the compiled step. Arrays reach torch through DLPack, without copies.
+fields the ParamSpec touches, None elsewhere). A reset uploads the parameters [N, D] alone: the fields
+(ParamSpec.field_values with jax.numpy) and the constants mj_setConst derives from them that change
+within the prior's range (mass, inertia, geometry, ...: mjx_constants, a JAX port) are computed on the
+device inside the compiled reset, and replace the old ones in the reset slots. A constant the port does
+not cover for a model is computed on the host with `mujoco.batch` and uploaded whole. Observations,
+rewards and terminations are the task's own array code, run with xp=jax.numpy inside the compiled step.
+Arrays reach torch through DLPack, without copies.
 
 Compilations: one step and one reset per simulator (the pool keeps one per batch size), one fused
 rollout per horizon (jax.jit's cache, keyed by the actions' shape); JAX's persistent compilation cache (`cache_dir`) keeps them across processes.
@@ -35,6 +37,7 @@ from ..errors import ConfigError  # noqa: E402
 from ..registry import register  # noqa: E402
 from ..tasks.base import Task  # noqa: E402
 from .base import Policy, Simulator, broke_down  # noqa: E402
+from .mjx_constants import DeviceConstants, host_reasons  # noqa: E402
 from .native import NativeConfig, NativeSimulator  # noqa: E402
 from .params import ParamSpec  # noqa: E402
 from .trajectories import Trajectories  # noqa: E402
@@ -46,8 +49,9 @@ _STATIC_FIELDS = frozenset({"geom_contype", "geom_conaffinity", "geom_condim", "
 # the MjData fields mjx.step reads (MuJoCo's mjSTATE_INTEGRATION); every other field it derives from them
 _STEP_INPUTS = ("time", "qpos", "qvel", "act", "history", "qacc_warmstart", "plugin_state", "ctrl", "qfrc_applied",
                 "xfrc_applied", "eq_active", "mocap_pos", "mocap_quat", "userdata")
-log = logging.getLogger(__name__)
 _PROBES = 8  # random parameter sets (besides the bounds) that decide which derived constants vary
+log = logging.getLogger(__name__)
+_LOGGED: set[tuple] = set()  # (task, constants) already reported as computed on the host
 
 
 @dataclasses.dataclass
@@ -145,17 +149,18 @@ class MjxSimulator(Simulator):
         # MuJoCo Warp keeps contacts of all environments in one buffer, constraint rows per environment
         self._data_sizes = dict(impl="warp", naconmax=num_envs * task.warp_buffer("contacts_per_env"),
                                 njmax=task.warp_buffer("constraints_per_env")) if self.impl == "warp" else {}
+        # the derived constants are computed by MJX's JAX functions, whichever implementation steps
+        self._jax_nominal = self.nominal
         if self.impl == "warp":
             self.nominal = _quiet_solver(self.nominal)
-        needs_set_const = randomize and task.spec.needs_set_const
-        self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if needs_set_const else None
-        derived = self._varying_constants() if randomize else []
+            self._jax_nominal = mjx.put_model(self.mj_model, impl="jax")
+        constants = self._varying_constants() if randomize and task.spec.needs_set_const else []
         if self.impl == "warp":  # MuJoCo Warp keeps some derived constants (dof_M0) one for all worlds
-            shared = [n for n in derived if not _warp_batchable(n)]
+            shared = [n for n in constants if not _warp_batchable(n)]
             if shared:
                 log.info("sim.impl=warp: %s stay nominal in every slot (MuJoCo Warp does not batch them)", shared)
-            derived = [n for n in derived if n not in shared]
-        names = list(task.spec.fields) + derived if randomize else []
+            constants = [n for n in constants if n not in shared]
+        names = list(task.spec.fields) + constants if randomize else []
         for name in names:
             leaf = _get(self.nominal, name)
             if not isinstance(leaf, jax.Array) or not jax.numpy.issubdtype(leaf.dtype, jax.numpy.floating):
@@ -163,9 +168,18 @@ class MjxSimulator(Simulator):
             if self.impl == "warp" and not _warp_batchable(name):
                 raise ConfigError(f"sim.impl=warp cannot set {name} per simulation (MuJoCo Warp shares it "
                                   "between environments); use sim.impl=jax")
-        # host copies of every batched leaf, [N, ...]; resets write rows and upload the whole leaf
-        self._host = {n: np.repeat(np.asarray(_get(self.nominal, n))[None], num_envs, 0) for n in names}
-        self.leaves = {n: self._put(v, _get(self.nominal, n).dtype) for n, v in self._host.items()}
+        on_host = host_reasons(m, constants)
+        if on_host and (task.name, tuple(on_host)) not in _LOGGED:
+            _LOGGED.add((task.name, tuple(on_host)))
+            log.info("sim=mjx %s: constants computed on the host by mujoco.batch's set_const: %s", task.name,
+                     "; ".join(f"{n} ({why})" for n, why in on_host.items()))
+        self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if on_host else None
+        # host copies [N, ...] of the constants computed there; resets write rows and upload the whole leaf
+        self._host = {n: np.repeat(np.asarray(_get(self.nominal, n))[None], num_envs, 0) for n in on_host}
+        self._constants = DeviceConstants(m, mjx.make_data(self._jax_nominal),
+                                          [c for c in constants if c not in on_host])
+        nominal = {n: np.asarray(_get(self.nominal, n)) for n in names}
+        self.leaves = {n: self._put(np.broadcast_to(v, (num_envs,) + v.shape), v.dtype) for n, v in nominal.items()}
         axes = jax.tree_util.tree_map(lambda _: None, self.nominal)
         self._model_axes = axes.tree_replace({n: 0 for n in names})
         self.data = jax.device_put(jax.jit(self._blank)(), self._dev)
@@ -195,8 +209,6 @@ class MjxSimulator(Simulator):
 
     def _varying_constants(self) -> list[str]:
         """Constants mj_setConst derives that change within the prior's box (batched alongside)."""
-        if self._setconst is None:
-            return []
         spec, m = self.task.spec, self.task.model
         rng = np.random.default_rng(0)
         probes = np.concatenate([spec.low[None], spec.high[None], rng.uniform(spec.low, spec.high, (_PROBES, spec.dim))])
@@ -222,9 +234,19 @@ class MjxSimulator(Simulator):
         return self.jax.vmap(lambda _: self.mjx.make_data(self.mj_model, **self._data_sizes))(
             self.jnp.arange(self.num_envs))
 
-    def _reset_all(self, leaves, data, obs, broken, mask, state):
-        """Fresh data with `state` and a forward pass in the slots of `mask`; the others keep theirs."""
+    def _slot_leaves(self, params):
+        """Every slot's fields and device-computed constants for parameters [N, D]."""
+        fields = self.task.spec.field_values(self.nominal, params, self.jnp)
+        fields = {n: v.reshape(params.shape[:1] + _get(self.nominal, n).shape) for n, v in fields.items()}
+        return fields | self.jax.vmap(lambda f: self._constants(self._jax_nominal.tree_replace(f)))(fields)
+
+    def _reset_all(self, leaves, host_leaves, data, obs, broken, mask, params, state):
+        """New leaves (from `params`), fresh data with `state` and a forward pass in the slots of `mask`; the
+        others keep theirs. Without randomization `params` is None and the leaves stay."""
         jax, jnp = self.jax, self.jnp
+        if params is not None:
+            new = self._slot_leaves(params)
+            leaves = leaves | _where(jnp, mask, new, {n: leaves[n] for n in new}) | host_leaves
         fresh = self._blank()
         fresh = fresh.replace(**{k: jnp.asarray(v, getattr(fresh, k).dtype).reshape(getattr(fresh, k).shape)
                                  for k, v in state.items()})
@@ -233,7 +255,7 @@ class MjxSimulator(Simulator):
         data = jax.vmap(lambda d, f, m: d.where(m, f))(data, fresh, mask)
         new_obs = jnp.asarray(self.task.observe(data, xp=jnp), jnp.float32)
         obs = jnp.where(mask[:, None], new_obs, obs)
-        return data, obs, broken & ~mask
+        return leaves, data, obs, broken & ~mask
 
     def _control_step(self, leaves, data, obs, broken, actions):
         jax, jnp = self.jax, self.jnp
@@ -256,20 +278,20 @@ class MjxSimulator(Simulator):
     # the protocol ------------------------------------------------------------------------------
     def _reset(self, params: torch.Tensor, ids: torch.Tensor, state: dict[str, np.ndarray]) -> torch.Tensor:
         ids_np = ids.numpy()
-        values = self.task.spec.field_values(self.task.model, params.numpy()) if self.randomize else {}
+        spec, slot_params = self.task.spec, None
+        if self.randomize:  # the slots not reset get the nominal parameters: computed, then discarded
+            slot_params = np.tile(spec.nominal.astype(np.float32), (self.num_envs, 1))
+            slot_params[ids_np] = params.numpy()
+            slot_params = self._put(slot_params)
         if self._setconst is not None:
-            for name, vals in values.items():
+            for name, vals in spec.field_values(self.task.model, params.numpy()).items():
                 target = self._setconst.expand(name)
                 target[ids_np] = vals.reshape((len(ids_np),) + target.shape[1:])
             self._setconst.set_const(ids_np)
-            for name in self._host:
-                if name not in values:  # batch.set_const leaves a constant shared while no slot changed it
-                    derived = self._setconst.expanded(name)
-                    values[name] = (np.repeat(getattr(self.task.model, name)[None], len(ids_np), 0) if derived is None
-                                    else derived[ids_np])
-        for name, vals in values.items():
-            self._host[name][ids_np] = vals.reshape((len(ids_np),) + self._host[name].shape[1:])
-        self.leaves = {n: self._put(v, self.leaves[n].dtype) for n, v in self._host.items()}
+            for name, rows in self._host.items():  # batch.set_const leaves a constant shared while no slot changed it
+                derived = self._setconst.expanded(name)
+                rows[ids_np] = getattr(self.task.model, name) if derived is None else derived[ids_np]
+        host_leaves = {n: self._put(v, self.leaves[n].dtype) for n, v in self._host.items()}
         mask = np.zeros(self.num_envs, bool)
         mask[ids_np] = True
         full_state = {}
@@ -278,8 +300,8 @@ class MjxSimulator(Simulator):
             arr = np.zeros(current.shape, current.dtype)
             arr[ids_np] = np.asarray(v).reshape((len(ids_np),) + current.shape[1:])
             full_state[field] = self._put(arr)
-        self.data, self.obs, self.broken = self._reset_fn(self.leaves, self.data, self.obs, self.broken,
-                                                          self._put(mask), full_state)
+        self.leaves, self.data, self.obs, self.broken = self._reset_fn(
+            self.leaves, host_leaves, self.data, self.obs, self.broken, self._put(mask), slot_params, full_state)
         return to_torch(self.obs)[ids.to(self.device)]
 
     def _step(self, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -147,11 +147,12 @@ class ParamSpec:
             raise ValueError(f"parameter values must be [N, {self.dim}] ({', '.join(self.names)}), got {values.shape}")
         return values
 
-    def field_values(self, model: mujoco.MjModel, values: np.ndarray) -> dict[str, np.ndarray]:
-        """Per-environment values [N, ...] of every field the parameters touch."""
-        values = self.check_values(values)
+    def field_values(self, model: Any, values: Any, xp: Any = np) -> dict[str, Any]:
+        """Per-environment values [N, ...] of every field the parameters touch. With xp=jax.numpy and an
+        mjx.Model, the same operations run traceably (under jit) in the model leaves' dtypes."""
+        values = self.check_values(values) if xp is np else values
         n = values.shape[0]
-        out = {f: np.repeat(_nominal(model, f)[None], n, axis=0) for f in self.fields}
+        out = {f: xp.repeat(_nominal(model, f, xp)[None], n, axis=0) for f in self.fields}
         for op in OPERATIONS[::-1]:  # set, scaling, additive
             for j, p in enumerate(self.params):
                 if p.operation != op:
@@ -162,11 +163,12 @@ class ParamSpec:
                     idx = t.index(arr)
                     bshape = (n,) + (1,) * (arr[idx].ndim - 1)
                     if op == "set":
-                        arr[idx] = (t.coef * v).reshape(bshape)
+                        new = (t.coef * v).reshape(bshape)
                     elif op == "scaling":
-                        arr[idx] = arr[idx] * ((v / p.nominal) ** t.power).reshape(bshape)
+                        new = arr[idx] * ((v / p.nominal) ** t.power).reshape(bshape)
                     else:
-                        arr[idx] = arr[idx] + (t.coef * v).reshape(bshape)
+                        new = arr[idx] + (t.coef * v).reshape(bshape)
+                    out[t.field] = _assign(arr, idx, new)
         return out
 
 
@@ -181,10 +183,20 @@ def _is_model_field(model: mujoco.MjModel, field: str) -> bool:
     return not field.startswith("_") and isinstance(getattr(model, field, None), np.ndarray)
 
 
-def _nominal(model: mujoco.MjModel, field: str) -> np.ndarray:
+def _nominal(model: Any, field: str, xp: Any = np) -> Any:
+    if xp is not np:  # an mjx.Model: its leaves, in their dtypes
+        return xp.atleast_1d(getattr(model.opt, field[4:]) if field.startswith("opt.") else getattr(model, field))
     if field.startswith("opt."):
         return np.atleast_1d(np.array(getattr(model.opt, field[4:]), dtype=np.float64))
     return np.array(getattr(model, field), dtype=np.float64)
+
+
+def _assign(arr: Any, idx: tuple, new: Any) -> Any:
+    """arr with arr[idx] = new: in place for numpy, a functional update for JAX arrays."""
+    if isinstance(arr, np.ndarray):
+        arr[idx] = new
+        return arr
+    return arr.at[idx].set(new)
 
 
 def _unknown(kind: str, name: str, valid: Iterable[str]) -> str:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from matplotlib.contour import QuadContourSet
 
-from bayessim_exp.logging.plots import hpd_thresholds, pair_plot, zoom_window
+from bayessim_exp.logging.plots import hpd_thresholds, pair_plot, replay_plot, zoom_window
 
 
 def test_zoom_window_follows_the_posterior_not_the_prior():
@@ -38,3 +38,16 @@ def test_pair_plot_panels_are_zoomed_with_contours_and_the_true_value():
     assert axes[0, 0].get_xlim()[0] <= 1.01 <= axes[0, 0].get_xlim()[1]
     assert any(isinstance(c, QuadContourSet) for c in axes[1, 0].get_children())
     assert any("true 0.9" in t.get_text() for t in axes[1, 1].texts)  # outside the damping window: an arrow
+
+
+def test_replay_plot_draws_each_colour_as_one_collection_within_the_axes():
+    rng = np.random.default_rng(3)
+    real, posterior, prior = rng.normal(size=(2, 11, 3)), rng.normal(size=(2, 30, 11, 3)), 5 + rng.normal(size=(2, 30, 11, 3))
+    posterior[0, 1, 5:, 0] = np.nan  # a replay that diverged
+    fig = replay_plot(real, posterior, prior, ["a", "b", "c"], 0.1, [0.5, 0.01], "round 1", max_lines=20)
+    assert len(fig.axes) == 6
+    for ax in fig.axes:
+        assert [len(c.get_segments()) for c in ax.collections] == [20, 20]
+        assert len(ax.lines) == 1  # the real trajectory
+        low, high = ax.get_ylim()
+        assert low < -1 and high > 6  # the prior's replays around 5 are in view

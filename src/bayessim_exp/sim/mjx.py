@@ -153,7 +153,7 @@ class MjxSimulator(Simulator):
         self._jax_nominal = self.nominal
         if self.impl == "warp":
             self.nominal = _quiet_solver(self.nominal)
-            self._jax_nominal = mjx.put_model(self.mj_model, impl="jax")
+            self._jax_nominal = mjx.put_model(task.mjx_model, impl="jax")  # the constants do not depend on condim
         constants = self._varying_constants() if randomize and task.spec.needs_set_const else []
         if self.impl == "warp":  # MuJoCo Warp keeps some derived constants (dof_M0) one for all worlds
             shared = [n for n in constants if not _warp_batchable(n)]
@@ -238,7 +238,9 @@ class MjxSimulator(Simulator):
         """Every slot's fields and device-computed constants for parameters [N, D]."""
         fields = self.task.spec.field_values(self.nominal, params, self.jnp)
         fields = {n: v.reshape(params.shape[:1] + _get(self.nominal, n).shape) for n, v in fields.items()}
-        return fields | self.jax.vmap(lambda f: self._constants(self._jax_nominal.tree_replace(f)))(fields)
+        constants = self.jax.vmap(lambda f: self._constants(self._jax_nominal.tree_replace(f)))(fields)
+        # MuJoCo Warp lays some out differently (geom_aabb: [2, 3] per geom where JAX has 6)
+        return fields | {n: v.reshape(params.shape[:1] + _get(self.nominal, n).shape) for n, v in constants.items()}
 
     def _reset_all(self, leaves, host_leaves, data, obs, broken, mask, params, state):
         """New leaves (from `params`), fresh data with `state` and a forward pass in the slots of `mask`; the

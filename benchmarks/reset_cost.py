@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 
 from bayessim_exp import api, registry  # noqa: E402
 from bayessim_exp.sim import mjx as mjx_sim  # noqa: E402
+from bayessim_exp.sim import mjx_constants  # noqa: E402
 
 
 def timed_resets(sim, params: np.ndarray, reps: int) -> tuple[float, float]:
@@ -54,8 +55,8 @@ def main():
     ap.add_argument("--host-constants", action="store_true")
     args = ap.parse_args()
     if args.host_constants:  # the fallback for every constant
-        mjx_sim.host_reasons = lambda m, names: dict.fromkeys(names, "--host-constants")
-    cfg = mjx_sim.MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=0, native_below=0)
+        mjx_constants.host_reasons = lambda m, names: dict.fromkeys(names, "--host-constants")
+    cfg = mjx_sim.MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=0, native_below=0, impl="jax")
     print(f"device {jax.devices()[0]}, {args.envs} slots, median of {args.reps} resets"
           f"{' (constants on the host)' if args.host_constants else ''}")
     print(f"{'task':<12} {'wall s':>8} {'compiled s':>11} {'host s':>8}")

@@ -24,7 +24,7 @@ from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, resolve_impl  # noqa: 
 
 pytestmark = pytest.mark.slow
 NATIVE = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
-MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0)
+MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto")
 # horizon (control steps) and tolerance on every observation, per task: the contact task's
 # trajectories part faster (float32 contact solver against float64), so it is compared over fewer steps;
 # Cartpole's MJX tuning stops the solver after 4 iterations, where MJX and MuJoCo are not at the same

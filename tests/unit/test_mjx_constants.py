@@ -18,12 +18,12 @@ from bayessim_exp import registry
 from bayessim_exp.policies import RandomPolicy
 
 pytest.importorskip("mujoco.mjx")
-from bayessim_exp.sim import mjx as mjx_sim  # noqa: E402
+from bayessim_exp.sim import mjx_constants  # noqa: E402
 from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
 from bayessim_exp.sim.mjx_constants import host_reasons  # noqa: E402
 
 pytestmark = pytest.mark.slow
-MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0)
+MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto")
 # float32 on the device against float64 MuJoCo: inv(M) of the humanoid (23 dofs, masses from 0.1 to 8 kg)
 # loses more digits than the small models' (measured max relative error 2.2e-5; the others below 3e-6)
 RTOL = {"Pendulum": 1e-5, "Cartpole": 1e-5, "BallBalance": 1e-5, "Ingenuity": 1e-5, "Humanoid": 1e-4}
@@ -61,7 +61,7 @@ def test_trajectories_equal_the_host_path_and_resets_touch_their_slots_only(comp
     params = params_for(task, 3, seed=4)
     device = MjxSimulator(task, 3, MJX)
     with monkeypatch.context() as patch:  # every constant through mujoco.batch's set_const, as before the port
-        patch.setattr(mjx_sim, "host_reasons", lambda m, names: dict.fromkeys(names, "test"))
+        patch.setattr(mjx_constants, "host_reasons", lambda m, names: dict.fromkeys(names, "test"))
         host = MjxSimulator(task, 3, MJX)
     assert not device._host and set(host._host) == set(device._constants.names) != set()
     a = device.rollout(params, RandomPolicy(task.action_dim, 1), 10, seed=2)

@@ -37,7 +37,6 @@ from ..errors import ConfigError  # noqa: E402
 from ..registry import register  # noqa: E402
 from ..tasks.base import Task  # noqa: E402
 from .base import Policy, Simulator, broke_down  # noqa: E402
-from .mjx_constants import DeviceConstants, host_reasons  # noqa: E402
 from .native import NativeConfig, NativeSimulator  # noqa: E402
 from .params import ParamSpec  # noqa: E402
 from .trajectories import Trajectories  # noqa: E402
@@ -60,7 +59,7 @@ class MjxConfig:
     cache_dir: Any  # JAX's persistent compilation cache (str), or None: off
     nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: all)
     native_below: int  # batches smaller than this run on native MuJoCo (the tuned model) on CPU threads
-    impl: str = "auto"  # jax, warp, or auto: warp where warp-lang is installed and the GPU is NVIDIA's
+    impl: str  # jax, warp, or auto: warp where warp-lang is installed and the GPU is NVIDIA's
 
     def validate(self) -> None:
         if self.max_abs_qvel <= 0 or self.nthread < 0 or self.native_below < 0:
@@ -137,6 +136,8 @@ class MjxSimulator(Simulator):
         self.cfg, self.randomize = cfg, randomize
         self.jax = jax = jax_setup(cfg.cache_dir)
         from mujoco import mjx
+
+        from .mjx_constants import DeviceConstants, host_reasons  # imports MJX and JAX: not on a CPU-only run
 
         self.jnp, self.mjx = jax.numpy, mjx
         # every input committed to one device: a jitted function sees the same placement on every call

@@ -1,9 +1,6 @@
-"""models/adam.py is torch.optim.Adam's arithmetic without importing torch.optim (and torch._dynamo)."""
+"""models/adam.py is torch.optim.Adam's arithmetic (without importing torch.optim and torch._dynamo: tests/unit/test_imports.py)."""
 
 from __future__ import annotations
-
-import subprocess
-import sys
 
 import pytest
 import torch
@@ -32,11 +29,3 @@ def test_the_same_parameters_as_torch_optim_adam(fused):
     theirs = _train(lambda p: torch.optim.Adam(p, lr=1e-2, weight_decay=1e-3, fused=True if fused else None))
     assert torch.equal(ours, theirs)
 
-
-def test_a_pipeline_process_fits_a_model_without_importing_torch_dynamo():
-    code = ("import sys, torch; from bayessim_exp import api, registry; import bayessim_exp.pipeline; "
-            "cfg = api.compose(['model.max_epochs=2']); "
-            "m = registry.build('model', cfg.model, theta_dim=2, x_dim=3); "
-            "m.fit(torch.randn(300, 2), torch.randn(300, 3), seed=0); print('torch._dynamo' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip().endswith("False")

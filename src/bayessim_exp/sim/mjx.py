@@ -145,7 +145,7 @@ class MjxSimulator(Simulator):
         self._dev = jax.devices()[0]
         m = task.model
         self.impl = resolve_impl(cfg.impl)
-        self.mj_model = task.warp_model if self.impl == "warp" else task.mjx_model  # with the task's MJX tuning
+        self.mj_model = task.tuned_model(self.impl)
         self.nominal = mjx.put_model(self.mj_model, impl=self.impl)
         # MuJoCo Warp keeps contacts of all environments in one buffer, constraint rows per environment
         self._data_sizes = dict(impl="warp", naconmax=num_envs * task.warp_buffer("contacts_per_env"),
@@ -380,7 +380,7 @@ def mjx_backend(cfg: MjxConfig):
 
     def make(task: Task, num_envs: int) -> Simulator:
         if num_envs < cfg.native_below:
-            return NativeSimulator(task, num_envs, native, model=task.warp_model if impl == "warp" else task.mjx_model)
+            return NativeSimulator(task, num_envs, native, model=task.tuned_model(impl))
         return MjxSimulator(task, num_envs, cfg)
 
     return make

@@ -101,6 +101,10 @@ class Task:
         frictionless contacts with elliptic cones)."""
         return self._tuned({k: v for k, v in self.cfg.mjx_tuning.items() if k != "min_condim"})
 
+    def tuned_model(self, impl: str) -> mujoco.MjModel:
+        """The model MJX simulates with implementation `impl` (jax or warp)."""
+        return self.warp_model if impl == "warp" else self.mjx_model
+
     def warp_buffer(self, key: str) -> int:
         return int(self.cfg.mjx_tuning.get(key, WARP_BUFFERS[key]))
 

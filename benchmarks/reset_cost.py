@@ -1,6 +1,6 @@
 """Seconds per MjxSimulator reset of every slot, split into the host's share and the compiled reset's.
 
-    python benchmarks/reset_cost.py [--tasks Pendulum,Cartpole] [--envs 131072] [--reps 3] [--host-constants]
+    python benchmarks/reset_cost.py [--tasks Pendulum,Cartpole] [--envs 131072] [--reps 3] [--host-constants] [--impl jax]
 
 `host s` is the reset's wall time less the compiled reset (new leaves, fresh data and a forward pass,
 timed to completion): drawing the initial states, building the slot arrays, any mujoco.batch set_const
@@ -53,11 +53,12 @@ def main():
     ap.add_argument("--envs", type=int, default=131072)
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--host-constants", action="store_true")
+    ap.add_argument("--impl", default="jax", help="sim.impl: jax, warp or auto")
     args = ap.parse_args()
     if args.host_constants:  # the fallback for every constant
         mjx_constants.host_reasons = lambda m, names: dict.fromkeys(names, "--host-constants")
-    cfg = mjx_sim.MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=0, native_below=0, impl="jax")
-    print(f"device {jax.devices()[0]}, {args.envs} slots, median of {args.reps} resets"
+    cfg = mjx_sim.MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=0, native_below=0, impl=args.impl)
+    print(f"device {jax.devices()[0]}, sim.impl={mjx_sim.resolve_impl(args.impl)}, {args.envs} slots, median of {args.reps} resets"
           f"{' (constants on the host)' if args.host_constants else ''}")
     print(f"{'task':<12} {'wall s':>8} {'compiled s':>11} {'host s':>8}")
     for name in args.tasks.split(","):

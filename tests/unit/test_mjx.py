@@ -110,3 +110,14 @@ def test_implementation_is_chosen_or_refused_clearly(compose):
     assert hand.warp_buffer("constraints_per_env") == 192 and hand.warp_model.opt.iterations == 5
     with pytest.raises(ConfigError, match="contacts_per_env"):
         registry.build("task", compose(["task=Pendulum", "++task.mjx_tuning.contacts_per_env=0"]).task)
+
+
+def test_slots_whose_constraint_rows_overflow_warp_count_as_diverged(compose):
+    if resolve_impl("auto") != "warp":
+        pytest.skip("MuJoCo Warp needs warp-lang and an NVIDIA GPU")
+    # Cartpole's two friction-loss rows are always there: one row of buffer drops a row in every slot
+    small = registry.build("task", compose(["task=Cartpole", "++task.mjx_tuning.constraints_per_env=1"]).task)
+    task = registry.build("task", compose(["task=Cartpole"]).task)
+    params = params_for(task, 4)
+    assert MjxSimulator(small, 4, MJX).rollout(params, RandomPolicy(1, 0), 5, seed=0).diverged.all()
+    assert not MjxSimulator(task, 4, MJX).rollout(params, RandomPolicy(1, 0), 5, seed=0).diverged.any()

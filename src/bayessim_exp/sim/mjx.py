@@ -266,8 +266,15 @@ class MjxSimulator(Simulator):
         before = data
         data = data.replace(ctrl=jnp.asarray(self.task.ctrl(actions, xp=jnp), data.ctrl.dtype))
         step = jax.vmap(self.mjx.step, in_axes=(self._model_axes, 0))
-        data = jax.lax.fori_loop(0, self.task.frame_skip, lambda _, d: step(mx, d), data)
-        now_broken = broke_down(data.qpos, data.qvel, self.cfg.max_abs_qvel, xp=jnp)
+
+        def substep(_, carry):
+            d, overflowed = carry
+            d = step(mx, d)
+            return d, overflowed | self._rows_dropped(d)
+
+        data, overflowed = jax.lax.fori_loop(0, self.task.frame_skip, substep,
+                                             (data, jnp.zeros(obs.shape[0], bool)))
+        now_broken = broke_down(data.qpos, data.qvel, self.cfg.max_abs_qvel, xp=jnp) | overflowed
         held = now_broken | broken
         # frozen at the last finite state, so it never poisons the batch; only what mjx.step reads is
         # restored (the derived fields are recomputed from it), a fraction of the memory traffic
@@ -277,6 +284,13 @@ class MjxSimulator(Simulator):
         reward = jnp.asarray(self.task.reward(obs, actions, new_obs, xp=jnp), jnp.float32)
         terminated = jnp.asarray(self.task.terminated(new_obs, xp=jnp), bool)
         return data, new_obs, held, reward, terminated, now_broken
+
+    def _rows_dropped(self, data):
+        """Per slot: MuJoCo Warp dropped constraint rows over its buffer (`constraints_per_env`), so the
+        step's physics is wrong; the slot counts as diverged. MJX's JAX implementation sizes them fully."""
+        if self.impl != "warp":
+            return self.jnp.zeros(data.qpos.shape[0], bool)
+        return data._impl.nefc > self._data_sizes["njmax"]
 
     # the protocol ------------------------------------------------------------------------------
     def _reset(self, params: torch.Tensor, ids: torch.Tensor, state: dict[str, np.ndarray]) -> torch.Tensor:

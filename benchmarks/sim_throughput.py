@@ -12,9 +12,10 @@ policy's actions, observations, rewards, divergence checks and the trajectories 
   native      NativeSimulator on all CPU threads, randomized: the baseline in the same run
   mjx-plain   plain MJX on the nominal model with the task's mjx_tuning (vmap(mjx.step) in lax.scan,
               random controls, no task code)
-The MJX rows run the implementation `--impl` resolves to (sim.impl: JAX, or MuJoCo Warp).
   mjx-fixed   MjxSimulator with randomize=False (one model for every slot)
   mjx         MjxSimulator with a parameter set per slot drawn from the prior's box
+The MJX rows run the implementation `--impl` resolves to for each task (sim.impl: JAX, or MuJoCo Warp; auto
+takes a task's `mjx_tuning.impl`), shown in the impl column.
 "randomization overhead" = 1 - mjx / mjx-fixed at the same size (sizes in --baseline-envs). Each figure is the median of
 `--reps` timed calls after a first call (compilation, or a persistent-cache load, included, reported
 as `first s`). `--compile-only` makes the first calls alone, to fill JAX's persistent cache
@@ -129,18 +130,17 @@ def main():
     args = ap.parse_args()
     jax = jax_setup(args.cache_dir)
     cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0, native_below=0, impl=args.impl)
-    impl = resolve_impl(args.impl)
     reps = 0 if args.compile_only else args.reps
     rows_wanted = set(args.rows.split(","))
     rows = []
 
     def record(task, backend, envs, horizon, first, median):
         rate = None if median is None else envs * horizon / median
-        rows.append({"task": task.name, "backend": backend, "envs": envs, "horizon": horizon,
+        rows.append({"task": task.name, "impl": "-" if backend == "native" else resolve_impl(args.impl, task), "backend": backend, "envs": envs, "horizon": horizon,
                      "frame_skip": task.frame_skip, "first_s": round(first, 2), "median_s": median,
                      "env_steps_per_s": rate})
         shown = "-" if rate is None else f"{rate:,.0f}"
-        print(f"{task.name:<16} {backend:<10} {envs:>8} x {horizon:<4} first {first:7.1f} s  {shown:>14} env-steps/s",
+        print(f"{task.name:<16} {backend:<10} {rows[-1]['impl']:<5} {envs:>8} x {horizon:<4} first {first:7.1f} s  {shown:>14} env-steps/s",
               flush=True)
 
     for name in args.tasks.split(","):
@@ -169,12 +169,12 @@ def main():
 
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"device": str(jax.devices()[0]), "impl": impl, "torch": torch.__version__, "jax": jax.__version__,
+            json.dump({"device": str(jax.devices()[0]), "torch": torch.__version__, "jax": jax.__version__,
                        "rows": rows}, f, indent=1)
     if args.compile_only:
         return
-    print(f"\ndevice {jax.devices()[0]}, MJX implementation {impl}; control steps/s, median of {args.reps} rollouts after a first call")
-    print(f"{'task':<16} {'backend':<10} {'envs':>8} {'env-steps/s':>14} {'vs native':>10} {'randomization overhead':>24}")
+    print(f"\ndevice {jax.devices()[0]}, sim.impl={args.impl}; control steps/s, median of {args.reps} rollouts after a first call")
+    print(f"{'task':<16} {'backend':<10} {'impl':<5} {'envs':>8} {'env-steps/s':>14} {'vs native':>10} {'randomization overhead':>24}")
     for r in rows:
         if "error" in r:
             print(f"{r['task']:<16} FAILED: {r['error'][:100]}")
@@ -185,7 +185,7 @@ def main():
         fixed = next((x for x in rows if x.get("task") == r["task"] and x.get("backend") == "mjx-fixed"
                       and x["envs"] == r["envs"]), None)
         overhead = f"{1 - r['env_steps_per_s'] / fixed['env_steps_per_s']:+.1%}" if r["backend"] == "mjx" and fixed else ""
-        print(f"{r['task']:<16} {r['backend']:<10} {r['envs']:>8} {r['env_steps_per_s']:>14,.0f} {vs:>10} {overhead:>24}")
+        print(f"{r['task']:<16} {r['backend']:<10} {r['impl']:<5} {r['envs']:>8} {r['env_steps_per_s']:>14,.0f} {vs:>10} {overhead:>24}")
 
 
 if __name__ == "__main__":

@@ -110,6 +110,11 @@ def test_implementation_is_chosen_or_refused_clearly(compose):
     assert hand.warp_buffer("constraints_per_env") == 192 and hand.warp_model.opt.iterations == 5
     with pytest.raises(ConfigError, match="contacts_per_env"):
         registry.build("task", compose(["task=Pendulum", "++task.mjx_tuning.contacts_per_env=0"]).task)
+    # a task may prefer MJX's JAX implementation where it is the faster one (Pendulum); sim.impl decides when set
+    pendulum = registry.build("task", compose(["task=Pendulum"]).task)
+    assert resolve_impl("auto", pendulum) == "jax" and resolve_impl("auto", hand) == resolve_impl("auto")
+    with pytest.raises(ConfigError, match="mjx_tuning.impl"):
+        registry.build("task", compose(["task=Pendulum", "task.mjx_tuning.impl=warp"]).task)
 
 
 def test_slots_whose_constraint_rows_overflow_warp_count_as_diverged(compose):

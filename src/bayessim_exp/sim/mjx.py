@@ -50,7 +50,7 @@ _STEP_INPUTS = ("time", "qpos", "qvel", "act", "history", "qacc_warmstart", "plu
                 "xfrc_applied", "eq_active", "mocap_pos", "mocap_quat", "userdata")
 _PROBES = 8  # random parameter sets (besides the bounds) that decide which derived constants vary
 log = logging.getLogger(__name__)
-_LOGGED: set[tuple] = set()  # (task, constants) already reported as computed on the host
+_LOGGED: set[tuple] = set()  # (task, implementation) and (task, constants on the host) already reported
 
 
 @dataclasses.dataclass
@@ -71,10 +71,13 @@ class MjxConfig:
 IMPLS = ("auto", "jax", "warp")
 
 
-def resolve_impl(impl: str) -> str:
-    """MJX's implementation for `impl` on this machine; warp asked for where it cannot run is an error."""
+def resolve_impl(impl: str, task: Task | None = None) -> str:
+    """MJX's implementation for `impl` on this machine; warp asked for where it cannot run is an error.
+    auto: the task's `mjx_tuning.impl` where it names one (docs/tasks.md), else Warp where it can run."""
     import jax
 
+    if impl == "auto" and task is not None and task.cfg.mjx_tuning.get("impl") == "jax":
+        return "jax"
     nvidia = any(d.platform == "gpu" and "nvidia" in d.device_kind.lower() for d in jax.devices())
     if impl == "jax" or (impl == "auto" and not nvidia):
         return "jax"
@@ -144,7 +147,7 @@ class MjxSimulator(Simulator):
         # (uncommitted first inputs and committed outputs would compile everything twice)
         self._dev = jax.devices()[0]
         m = task.model
-        self.impl = resolve_impl(cfg.impl)
+        self.impl = resolve_impl(cfg.impl, task)
         self.mj_model = task.tuned_model(self.impl)
         self.nominal = mjx.put_model(self.mj_model, impl=self.impl)
         # MuJoCo Warp keeps contacts of all environments in one buffer, constraint rows per environment
@@ -389,10 +392,12 @@ def mjx_backend(cfg: MjxConfig):
     trajectories, the model checks' replays) takes less time on CPU threads than compiling MJX for its
     size would; it simulates the same tuned model there."""
     native = NativeConfig(nthread=cfg.nthread, max_abs_qvel=cfg.max_abs_qvel)
-    impl = resolve_impl(cfg.impl)
-    log.info("sim=mjx: MJX implementation %s (sim.impl=%s)", impl, cfg.impl)
 
     def make(task: Task, num_envs: int) -> Simulator:
+        impl = resolve_impl(cfg.impl, task)
+        if (task.name, impl) not in _LOGGED:
+            _LOGGED.add((task.name, impl))
+            log.info("sim=mjx %s: MJX implementation %s (sim.impl=%s)", task.name, impl, cfg.impl)
         if num_envs < cfg.native_below:
             return NativeSimulator(task, num_envs, native, model=task.tuned_model(impl))
         return MjxSimulator(task, num_envs, cfg)

@@ -21,10 +21,11 @@ from ..sim.params import ParamConfig, ParamSpec
 ASSETS = Path(__file__).parent / "assets"
 # what mjx_tuning may change: solver iterations and line-search iterations (MjOption), MJX's contact
 # caps (custom numerics it reads: contacts per geom pair, geom pairs per collision function), the
-# smallest geom condim (MJX's JAX implementation has no frictionless contacts with elliptic cones), and
-# MuJoCo Warp's buffers per environment (contacts, constraint rows; what overflows them is dropped)
+# smallest geom condim (MJX's JAX implementation has no frictionless contacts with elliptic cones),
+# MuJoCo Warp's buffers per environment (contacts, constraint rows; what overflows them is dropped), and
+# `impl: jax` where MJX's JAX implementation is the faster one for the task (sim.impl=auto takes it)
 MJX_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim",
-              "contacts_per_env", "constraints_per_env")
+              "contacts_per_env", "constraints_per_env", "impl")
 # MuJoCo Warp's own default sizes for models without height fields or flexes (mujoco_warp io.py)
 WARP_BUFFERS = {"contacts_per_env": 48, "constraints_per_env": 64}
 
@@ -57,6 +58,9 @@ class TaskConfig:
         unknown = set(self.mjx_tuning) - set(MJX_TUNING)
         if unknown:
             raise ConfigError(f"mjx_tuning: unknown keys {sorted(unknown)}; allowed: {', '.join(MJX_TUNING)}")
+        if self.mjx_tuning.get("impl", "jax") != "jax":
+            raise ConfigError(f"mjx_tuning.impl={self.mjx_tuning['impl']!r}: only 'jax' can be preferred (sim.impl=auto "
+                              "takes MuJoCo Warp wherever it runs otherwise)")
         small = [k for k in WARP_BUFFERS if k in self.mjx_tuning and int(self.mjx_tuning[k]) < 1]
         if small:
             raise ConfigError(f"mjx_tuning: {', '.join(small)} must be >= 1")
@@ -109,7 +113,7 @@ class Task:
         return int(self.cfg.mjx_tuning.get(key, WARP_BUFFERS[key]))
 
     def _tuned(self, tuning: dict[str, Any]) -> mujoco.MjModel:
-        if not set(tuning) - set(WARP_BUFFERS):
+        if not set(tuning) - set(WARP_BUFFERS) - {"impl"}:
             return self.model
         spec = mujoco.MjSpec.from_file(str(ASSETS / self.xml))
         for key in ("iterations", "ls_iterations"):

@@ -4,21 +4,25 @@
 
 Draws parameters from the task's prior, rolls the collect policy out with the native backend
 exactly as the pipeline's collect stage does (`SimulatorPool.rollout`), and stores theta and the raw
-trajectories in `<cache>/<task>_h<horizon>_seed<seed>.pt`, so that every summarizer and model of
-the benchmark reads the same simulations. A request for more simulations than are cached extends
+trajectories in `<cache>/<task>_h<horizon>_seed<seed>_<fingerprint>.pt` (the fingerprint changes with
+the task's config and compiled model), so that every summarizer and model of the benchmark reads the
+same simulations. A request for more simulations than are cached extends
 the file (new rows come from a seed derived from the chunk index: the prefix never changes).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import time
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import torch
+from omegaconf import OmegaConf
 
-from bayessim_exp import api
+from bayessim_exp import api, registry
 from bayessim_exp.components import build_components
 from bayessim_exp.run_config import check_run_config
 from bayessim_exp.sim.trajectories import Trajectories
@@ -32,6 +36,15 @@ def components(task: str, policy: str = "random", summarizer: str = "start", nth
     cfg = api.compose([f"task={task}", f"policy={policy}", f"summarizer={summarizer}", "sim=native",
                        f"sim.nthread={nthread}"])
     return cfg, build_components(cfg, check_run_config(cfg))
+
+
+def fingerprint(task: str) -> str:
+    """Of the task's config and compiled model: simulations of an earlier version are not reused."""
+    cfg = api.compose([f"task={task}"])
+    model = registry.build("task", cfg.task).model
+    mjb = np.empty(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, mjb)
+    return hashlib.sha1(OmegaConf.to_yaml(cfg.task).encode() + mjb.tobytes()).hexdigest()[:10]
 
 
 def _simulate_block(comp, block: int, n: int, horizon: int, seed: int) -> tuple[torch.Tensor, Trajectories]:
@@ -50,7 +63,7 @@ def load_simulations(task: str, sims: int, horizon: int = 50, seed: int = 0, cac
     and the random collect policy; simulates only what the cache lacks. n = sims, or fewer when simulating
     the missing blocks takes longer than `seconds` (no new block starts after that)."""
     cache.mkdir(parents=True, exist_ok=True)
-    path = cache / f"{task}_h{horizon}_seed{seed}.pt"
+    path = cache / f"{task}_h{horizon}_seed{seed}_{fingerprint(task)}.pt"
     stored = torch.load(path, weights_only=False) if path.exists() else {"theta": [], "traj": [], "seconds": 0.0}
     have = cached = sum(len(t) for t in stored["theta"])
     if have < sims:

@@ -392,6 +392,7 @@ def mjx_backend(cfg: MjxConfig):
     trajectories, the model checks' replays) takes less time on CPU threads than compiling MJX for its
     size would; it simulates the same tuned model there."""
     native = NativeConfig(nthread=cfg.nthread, max_abs_qvel=cfg.max_abs_qvel)
+    resolve_impl(cfg.impl)  # sim.impl=warp where it cannot run fails here, before any stage
 
     def make(task: Task, num_envs: int) -> Simulator:
         impl = resolve_impl(cfg.impl, task)

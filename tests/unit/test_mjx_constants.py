@@ -39,6 +39,7 @@ def test_device_leaves_equal_mujoco_set_const(compose, name):
     n = 6
     params = params_for(task, n, seed=3)
     sim = MjxSimulator(task, n, MJX)
+    warp_shared = {"dof_M0"} if sim.impl == "warp" else set()
     assert not sim._host  # every varying constant of these tasks is computed on the device
     leaves = sim.jax.jit(sim._slot_leaves)(sim.jnp.asarray(params, sim.jnp.float32))
     batch = mujoco.batch.Batch(task.model, n, nthread=1)
@@ -47,7 +48,8 @@ def test_device_leaves_equal_mujoco_set_const(compose, name):
         batch.expand(field)[:] = vals.reshape(batch.expand(field).shape)
     batch.set_const()
     constants = set(leaves) - set(values)
-    assert {"body_subtreemass", "dof_M0", "body_invweight0", "dof_invweight0"} <= constants
+    # MuJoCo Warp keeps dof_M0 one for all worlds (MjxSimulator leaves it nominal there)
+    assert {"body_subtreemass", "body_invweight0", "dof_invweight0"} | ({"dof_M0"} - warp_shared) <= constants
     for leaf, got in leaves.items():
         expected = values[leaf] if leaf in values else batch.expanded(leaf)
         expected = np.broadcast_to(getattr(task.model, leaf), got.shape) if expected is None else expected

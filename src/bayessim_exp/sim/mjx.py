@@ -310,7 +310,8 @@ class MjxSimulator(Simulator):
             self._setconst.set_const(ids_np)
             for name, rows in self._host.items():  # batch.set_const leaves a constant shared while no slot changed it
                 derived = self._setconst.expanded(name)
-                rows[ids_np] = getattr(self.task.model, name) if derived is None else derived[ids_np]
+                value = getattr(self.task.model, name) if derived is None else derived[ids_np]
+                rows[ids_np] = np.reshape(value, rows[ids_np].shape)  # MuJoCo Warp's layout (geom_aabb [2, 3])
         host_leaves = {n: self._put(v, self.leaves[n].dtype) for n, v in self._host.items()}
         mask = np.zeros(self.num_envs, bool)
         mask[ids_np] = True

@@ -242,7 +242,9 @@ class MjxSimulator(Simulator):
         """Every slot's fields and device-computed constants for parameters [N, D]."""
         fields = self.task.spec.field_values(self.nominal, params, self.jnp)
         fields = {n: v.reshape(params.shape[:1] + _get(self.nominal, n).shape) for n, v in fields.items()}
-        constants = self.jax.vmap(lambda f: self._constants(self._jax_nominal.tree_replace(f)))(fields)
+        # full float32 products: a GPU's default TF32 matmuls put Humanoid's actuator_acc0 off by 3 % (H100)
+        with self.jax.default_matmul_precision("float32"):
+            constants = self.jax.vmap(lambda f: self._constants(self._jax_nominal.tree_replace(f)))(fields)
         # MuJoCo Warp lays some out differently (geom_aabb: [2, 3] per geom where JAX has 6)
         return fields | {n: v.reshape(params.shape[:1] + _get(self.nominal, n).shape) for n, v in constants.items()}
 

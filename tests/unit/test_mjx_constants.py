@@ -21,6 +21,7 @@ pytest.importorskip("mujoco.mjx")
 from bayessim_exp.sim import mjx_constants  # noqa: E402
 from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
 from bayessim_exp.sim.mjx_constants import host_reasons  # noqa: E402
+from bayessim_exp.sim.params import model_field  # noqa: E402
 
 pytestmark = pytest.mark.slow
 MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto")
@@ -66,6 +67,13 @@ def test_trajectories_equal_the_host_path_and_resets_touch_their_slots_only(comp
         patch.setattr(mjx_constants, "host_reasons", lambda m, names: dict.fromkeys(names, "test"))
         host = MjxSimulator(task, 3, MJX)
     assert not device._host and set(host._host) == set(device._constants.names) != set()
+    # a first reset with nominal parameters in every slot: set_const leaves the constants shared, and the
+    # host copies take the model's
+    host.reset(np.tile(task.spec.nominal, (3, 1)), None)
+    for leaf in host._host:
+        nominal = np.asarray(model_field(host.nominal, leaf))
+        np.testing.assert_allclose(np.asarray(host.leaves[leaf]), np.broadcast_to(nominal, (3,) + nominal.shape),
+                                   rtol=1e-6, err_msg=leaf)
     a = device.rollout(params, RandomPolicy(task.action_dim, 1), 10, seed=2)
     b = host.rollout(params, RandomPolicy(task.action_dim, 1), 10, seed=2)
     for leaf in host.leaves:

@@ -38,7 +38,7 @@ from ..registry import register  # noqa: E402
 from ..tasks.base import Task  # noqa: E402
 from .base import Policy, Simulator, broke_down  # noqa: E402
 from .native import NativeConfig, NativeSimulator  # noqa: E402
-from .params import ParamSpec  # noqa: E402
+from .params import ParamSpec, model_field  # noqa: E402
 from .trajectories import Trajectories  # noqa: E402
 
 # fields MJX reads while tracing (collision pairs, sparsity, solver choice): one value for every slot
@@ -166,7 +166,7 @@ class MjxSimulator(Simulator):
             constants = [n for n in constants if n not in shared]
         names = list(task.spec.fields) + constants if randomize else []
         for name in names:
-            leaf = _get(self.nominal, name)
+            leaf = model_field(self.nominal, name)
             if not isinstance(leaf, jax.Array) or not jax.numpy.issubdtype(leaf.dtype, jax.numpy.floating):
                 raise ConfigError(f"sim=mjx cannot set {name} per simulation: MJX keeps it static")
             if self.impl == "warp" and not _warp_batchable(name):
@@ -179,10 +179,10 @@ class MjxSimulator(Simulator):
                      "; ".join(f"{n} ({why})" for n, why in on_host.items()))
         self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if on_host else None
         # host copies [N, ...] of the constants computed there; resets write rows and upload the whole leaf
-        self._host = {n: np.repeat(np.asarray(_get(self.nominal, n))[None], num_envs, 0) for n in on_host}
+        self._host = {n: np.repeat(np.asarray(model_field(self.nominal, n))[None], num_envs, 0) for n in on_host}
         self._constants = DeviceConstants(m, mjx.make_data(self._jax_nominal),
                                           [c for c in constants if c not in on_host])
-        nominal = {n: np.asarray(_get(self.nominal, n)) for n in names}
+        nominal = {n: np.asarray(model_field(self.nominal, n)) for n in names}
         self.leaves = {n: self._put(np.broadcast_to(v, (num_envs,) + v.shape), v.dtype) for n, v in nominal.items()}
         axes = jax.tree_util.tree_map(lambda _: None, self.nominal)
         self._model_axes = axes.tree_replace({n: 0 for n in names})
@@ -241,12 +241,16 @@ class MjxSimulator(Simulator):
     def _slot_leaves(self, params):
         """Every slot's fields and device-computed constants for parameters [N, D]."""
         fields = self.task.spec.field_values(self.nominal, params, self.jnp)
-        fields = {n: v.reshape(params.shape[:1] + _get(self.nominal, n).shape) for n, v in fields.items()}
+        fields = {n: self._leaf_layout(n, v) for n, v in fields.items()}
         # full float32 products: a GPU's default TF32 matmuls put Humanoid's actuator_acc0 off by 3 % (H100)
         with self.jax.default_matmul_precision("float32"):
             constants = self.jax.vmap(lambda f: self._constants(self._jax_nominal.tree_replace(f)))(fields)
-        # MuJoCo Warp lays some out differently (geom_aabb: [2, 3] per geom where JAX has 6)
-        return fields | {n: v.reshape(params.shape[:1] + _get(self.nominal, n).shape) for n, v in constants.items()}
+        return fields | {n: self._leaf_layout(n, v) for n, v in constants.items()}
+
+    def _leaf_layout(self, name: str, values: Any) -> Any:
+        """Values [k, ...] of a model field in the simulated model's layout (MuJoCo Warp keeps geom_aabb as
+        [2, 3] per geom where MuJoCo and MJX's JAX implementation have 6)."""
+        return values.reshape(values.shape[:1] + model_field(self.nominal, name).shape)
 
     def _reset_all(self, leaves, host_leaves, data, obs, broken, mask, params, state):
         """New leaves (from `params`), fresh data with `state` and a forward pass in the slots of `mask`; the
@@ -312,8 +316,8 @@ class MjxSimulator(Simulator):
             self._setconst.set_const(ids_np)
             for name, rows in self._host.items():  # batch.set_const leaves a constant shared while no slot changed it
                 derived = self._setconst.expanded(name)
-                value = getattr(self.task.model, name) if derived is None else derived[ids_np]
-                rows[ids_np] = np.reshape(value, rows[ids_np].shape)  # MuJoCo Warp's layout (geom_aabb [2, 3])
+                rows[ids_np] = self._leaf_layout(name, getattr(self.task.model, name)[None] if derived is None
+                                                 else derived[ids_np])
         host_leaves = {n: self._put(v, self.leaves[n].dtype) for n, v in self._host.items()}
         mask = np.zeros(self.num_envs, bool)
         mask[ids_np] = True
@@ -370,10 +374,6 @@ class MjxSimulator(Simulator):
         (data, obs, broken, _, diverged, _), (states, acts, rewards, valid) = jax.lax.scan(body, init, actions)
         states = jnp.concatenate([init[-1][:, None], states.transpose(1, 0, 2)], 1)
         return (data, obs, broken, states, acts.transpose(1, 0, 2), rewards.T, valid.T, diverged)
-
-
-def _get(model: Any, name: str) -> Any:
-    return getattr(model.opt, name[4:]) if name.startswith("opt.") else getattr(model, name)
 
 
 def _warp_batchable(name: str) -> bool:

@@ -183,12 +183,15 @@ def _is_model_field(model: mujoco.MjModel, field: str) -> bool:
     return not field.startswith("_") and isinstance(getattr(model, field, None), np.ndarray)
 
 
+def model_field(model: Any, field: str) -> Any:
+    """A field of an MjModel or mjx.Model by its spec name ('opt.<name>' for the MjOption fields)."""
+    return getattr(model.opt, field[4:]) if field.startswith("opt.") else getattr(model, field)
+
+
 def _nominal(model: Any, field: str, xp: Any = np) -> Any:
     if xp is not np:  # an mjx.Model: its leaves, in their dtypes
-        return xp.atleast_1d(getattr(model.opt, field[4:]) if field.startswith("opt.") else getattr(model, field))
-    if field.startswith("opt."):
-        return np.atleast_1d(np.array(getattr(model.opt, field[4:]), dtype=np.float64))
-    return np.array(getattr(model, field), dtype=np.float64)
+        return xp.atleast_1d(model_field(model, field))
+    return np.atleast_1d(np.array(model_field(model, field), dtype=np.float64))
 
 
 def _assign(arr: Any, idx: tuple, new: Any) -> Any:

@@ -19,15 +19,15 @@ from ..errors import ConfigError
 from ..sim.params import ParamConfig, ParamSpec
 
 ASSETS = Path(__file__).parent / "assets"
-# what mjx_tuning may change: solver iterations and line-search iterations (MjOption), MJX's contact
+# what mjx_tuning may change (MJX_TUNING), the model first (MODEL_TUNING): solver iterations and line-search iterations (MjOption), MJX's contact
 # caps (custom numerics it reads: contacts per geom pair, geom pairs per collision function), the
 # smallest geom condim (MJX's JAX implementation has no frictionless contacts with elliptic cones),
 # MuJoCo Warp's buffers per environment (contacts, constraint rows; what overflows them is dropped), and
 # `impl: jax` where MJX's JAX implementation is the faster one for the task (sim.impl=auto takes it)
-MJX_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim",
-              "contacts_per_env", "constraints_per_env", "impl")
+MODEL_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim")
 # MuJoCo Warp's own default sizes for models without height fields or flexes (mujoco_warp io.py)
 WARP_BUFFERS = {"contacts_per_env": 48, "constraints_per_env": 64}
+MJX_TUNING = (*MODEL_TUNING, *WARP_BUFFERS, "impl")
 
 
 @dataclasses.dataclass
@@ -113,7 +113,7 @@ class Task:
         return int(self.cfg.mjx_tuning.get(key, WARP_BUFFERS[key]))
 
     def _tuned(self, tuning: dict[str, Any]) -> mujoco.MjModel:
-        if not set(tuning) - set(WARP_BUFFERS) - {"impl"}:
+        if not set(tuning) & set(MODEL_TUNING):
             return self.model
         spec = mujoco.MjSpec.from_file(str(ASSETS / self.xml))
         for key in ("iterations", "ls_iterations"):

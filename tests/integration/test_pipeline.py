@@ -60,6 +60,7 @@ def test_results_and_tensorboard_are_written(compose, tmp_path):
     events = EventAccumulator(str(tmp_path), size_guidance={"images": 0}).Reload()
     assert {"loss/round_1/train", "loss/round_2/val", "log_prob_gain"} <= set(events.Tags()["scalars"])
     assert len(events.Images("posterior")) == 2  # one pair plot per round
+    assert len(events.Images("predictive/replay")) == 2  # the replayed predictive check's picture
     assert "config/text_summary" in events.Tags()["tensors"]
 
 

@@ -7,6 +7,8 @@ Tiny batches and few steps: MJX compiles for tens of seconds per model on a CPU.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")  # a compiled MJX loop on CPU has hung without it
 
@@ -20,6 +22,7 @@ from bayessim_exp.sim.native import NativeConfig, NativeSimulator
 
 pytest.importorskip("mujoco.mjx")
 from bayessim_exp.errors import ConfigError  # noqa: E402
+from bayessim_exp.sim import mjx as sim_mjx  # noqa: E402
 from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, resolve_impl  # noqa: E402
 
 pytestmark = pytest.mark.slow
@@ -115,6 +118,36 @@ def test_implementation_is_chosen_or_refused_clearly(compose):
     assert resolve_impl("auto", pendulum) == "jax" and resolve_impl("auto", hand) == resolve_impl("auto")
     with pytest.raises(ConfigError, match="mjx_tuning.impl"):
         registry.build("task", compose(["task=Pendulum", "task.mjx_tuning.impl=warp"]).task)
+
+
+def test_a_single_job_on_jax_leaves_warp_out(monkeypatch):
+    monkeypatch.setattr(sim_mjx, "_LEAVE_OUT_WARP", False)
+    assert sim_mjx.leave_out_warp("jax", {}) and sim_mjx.leave_out_warp("auto", {"impl": "jax"})
+    assert not sim_mjx.leave_out_warp("auto", {}) and not sim_mjx.leave_out_warp("warp", {"impl": "jax"})
+
+
+_IMPORT_MJX = """
+import sys
+from bayessim_exp.sim import mjx as sim_mjx
+sim_mjx.leave_out_warp(sys.argv[1], {})
+sim_mjx.import_mjx()
+from mujoco.mjx import warp
+assert not warp.WARP_INSTALLED and 'warp' not in sys.modules
+"""
+
+
+@pytest.mark.parametrize("impl", ["jax", "auto"])
+def test_mjx_is_imported_without_warp_where_the_job_leaves_it_out(impl, tmp_path):
+    """A stand-in warp-lang on the path records its import: only sim.impl=jax's import of MJX skips it."""
+    (tmp_path / "warp").mkdir()
+    (tmp_path / "warp" / "__init__.py").write_text(
+        "import os\nopen(os.environ['WARP_MARKER'], 'a').write('imported')\nraise ImportError('stand-in')\n")
+    marker = tmp_path / "marker"
+    env = os.environ | {"PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path]), "WARP_MARKER": str(marker)}
+    out = subprocess.run([sys.executable, "-c", _IMPORT_MJX, impl], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert marker.exists() == (impl == "auto")
+    assert "Failed to import" not in out.stdout or impl == "auto"  # MJX's print of the blocked import is swallowed
 
 
 def test_slots_whose_constraint_rows_overflow_warp_count_as_diverged(compose):

@@ -20,9 +20,14 @@ spreads NaNs nor keeps the solver iterating, and it stays flagged until its next
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import importlib.util
+import io
 import logging
 import os
+import sys
+from collections.abc import Mapping
 from typing import Any
 
 # before jax is imported anywhere: JAX and torch share the GPU instead of JAX taking 75 % of it up front
@@ -51,6 +56,7 @@ _STEP_INPUTS = ("time", "qpos", "qvel", "act", "history", "qacc_warmstart", "plu
 _PROBES = 8  # random parameter sets (besides the bounds) that decide which derived constants vary
 log = logging.getLogger(__name__)
 _LOGGED: set[tuple] = set()  # (task, implementation) and (task, constants on the host) already reported
+_LEAVE_OUT_WARP = False  # set by leave_out_warp: this process simulates on MJX's JAX implementation only
 
 
 @dataclasses.dataclass
@@ -74,13 +80,14 @@ IMPLS = ("auto", "jax", "warp")
 def resolve_impl(impl: str, task: Task | None = None) -> str:
     """MJX's implementation for `impl` on this machine; warp asked for where it cannot run is an error.
     auto: the task's `mjx_tuning.impl` where it names one (docs/tasks.md), else Warp where it can run."""
+    if impl == "jax" or (impl == "auto" and task is not None and _prefers_jax(task.cfg.mjx_tuning)):
+        return "jax"
     import jax
 
-    if impl == "auto" and task is not None and task.cfg.mjx_tuning.get("impl") == "jax":
-        return "jax"
     nvidia = any(d.platform == "gpu" and "nvidia" in d.device_kind.lower() for d in jax.devices())
-    if impl == "jax" or (impl == "auto" and not nvidia):
+    if impl == "auto" and not nvidia:
         return "jax"
+    import_mjx()
     from mujoco.mjx import warp as mjx_warp
 
     if mjx_warp.WARP_INSTALLED and nvidia:
@@ -88,6 +95,38 @@ def resolve_impl(impl: str, task: Task | None = None) -> str:
     if impl == "warp":
         raise ConfigError("sim.impl=warp needs an NVIDIA GPU and warp-lang (pip install -e '.[warp]')")
     return "jax"
+
+
+def _prefers_jax(mjx_tuning: Mapping) -> bool:
+    return mjx_tuning.get("impl") == "jax"
+
+
+def leave_out_warp(impl: str, mjx_tuning: Mapping) -> bool:
+    """Called by a process that runs one job (`python -m bayessim_exp` without --multirun) with that
+    job's sim.impl and task tuning: when they resolve to MJX's JAX implementation, MJX is imported
+    without MuJoCo Warp, which MJX otherwise imports whenever warp-lang is installed (the larger part of
+    importing MJX on the H100 machine, docs/benchmarks.md). Processes that may simulate another task
+    later (--multirun, the Python API) keep MJX's own import. Returns whether Warp is left out."""
+    global _LEAVE_OUT_WARP
+    _LEAVE_OUT_WARP = impl == "jax" or (impl == "auto" and _prefers_jax(mjx_tuning))
+    return _LEAVE_OUT_WARP
+
+
+def import_mjx() -> Any:
+    """mujoco.mjx, imported without MuJoCo Warp where leave_out_warp decided so (and nothing else
+    imported warp-lang before)."""
+    if (_LEAVE_OUT_WARP and "mujoco.mjx" not in sys.modules and "warp" not in sys.modules
+            and importlib.util.find_spec("warp") is not None):
+        sys.modules["warp"] = None  # type: ignore[assignment]  # `import warp` fails: MJX records Warp as absent
+        try:
+            with contextlib.redirect_stdout(io.StringIO()):  # MJX prints the failed imports
+                import mujoco.mjx  # noqa: F401
+        finally:
+            del sys.modules["warp"]
+        log.info("sim=mjx: MJX imported without MuJoCo Warp (this run simulates with MJX's JAX implementation)")
+    from mujoco import mjx
+
+    return mjx
 
 
 def jax_setup(cache_dir: str | None) -> Any:
@@ -107,7 +146,8 @@ def gpu_visible() -> bool:
         return False
     try:
         import jax
-        from mujoco import mjx  # noqa: F401
+
+        import_mjx()
     except ImportError:
         return False
     return any(d.platform == "gpu" for d in jax.devices())
@@ -138,8 +178,7 @@ class MjxSimulator(Simulator):
         super().__init__(task, num_envs)
         self.cfg, self.randomize = cfg, randomize
         self.jax = jax = jax_setup(cfg.cache_dir)
-        from mujoco import mjx
-
+        mjx = import_mjx()
         from .mjx_constants import DeviceConstants, host_reasons  # imports MJX and JAX: not on a CPU-only run
 
         self.jnp, self.mjx = jax.numpy, mjx
@@ -199,8 +238,7 @@ class MjxSimulator(Simulator):
     # configuration -----------------------------------------------------------------------
     @classmethod
     def check_spec(cls, spec: ParamSpec) -> None:
-        from mujoco import mjx
-
+        mjx = import_mjx()
         known = {f.name for f in dataclasses.fields(mjx.Model)} | {f"opt.{f.name}" for f in dataclasses.fields(mjx.Option)}
         unsupported = [f for f in spec.fields if f not in known or f in _STATIC_FIELDS]
         if unsupported:

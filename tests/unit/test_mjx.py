@@ -6,6 +6,7 @@ Tiny batches and few steps: MJX compiles for tens of seconds per model on a CPU.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -118,6 +119,19 @@ def test_implementation_is_chosen_or_refused_clearly(compose):
     assert resolve_impl("auto", pendulum) == "jax" and resolve_impl("auto", hand) == resolve_impl("auto")
     with pytest.raises(ConfigError, match="mjx_tuning.impl"):
         registry.build("task", compose(["task=Pendulum", "task.mjx_tuning.impl=warp"]).task)
+
+
+def test_a_later_simulator_loads_the_traced_programs_instead_of_tracing(compose, tmp_path, monkeypatch):
+    import jax
+
+    monkeypatch.setattr(sim_mjx, "jax_setup", lambda cache_dir: jax)  # JAX's compilation cache is global: left off
+    task = registry.build("task", compose(["task=Pendulum"]).task)
+    cfg, params = dataclasses.replace(MJX, cache_dir=str(tmp_path)), params_for(task, 4)
+    first = MjxSimulator(task, 4, cfg).rollout(params, RandomPolicy(1, 0), 5, seed=0)
+    later = MjxSimulator(task, 4, cfg)
+    again = later.rollout(params, RandomPolicy(1, 0), 5, seed=0)
+    assert later._reset_fn.traced == later._rollout_fn.traced == 0
+    torch.testing.assert_close(again.states, first.states, rtol=0, atol=0)
 
 
 def test_a_single_job_on_jax_leaves_warp_out(monkeypatch):

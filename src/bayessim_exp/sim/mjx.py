@@ -13,7 +13,8 @@ rewards and terminations are the task's own array code, run with xp=jax.numpy in
 Arrays reach torch through DLPack, without copies.
 
 Compilations: one step and one reset per simulator (the pool keeps one per batch size), one fused
-rollout per horizon (jax.jit's cache, keyed by the actions' shape); JAX's persistent compilation cache (`cache_dir`) keeps them across processes.
+rollout per horizon (jax.jit's cache, keyed by the actions' shape); JAX's persistent compilation cache (`cache_dir`) keeps them across processes,
+and on MJX's JAX implementation the traced programs too (trace_cache.py), so a later run neither traces nor compiles.
 A slot that breaks down is frozen at its last finite state (the fields mjx.step reads), so it neither
 spreads NaNs nor keeps the solver iterating, and it stays flagged until its next reset.
 """
@@ -22,12 +23,14 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import importlib.util
 import io
 import logging
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 
 # before jax is imported anywhere: JAX and torch share the GPU instead of JAX taking 75 % of it up front
@@ -44,6 +47,7 @@ from ..tasks.base import Task  # noqa: E402
 from .base import Policy, Simulator, broke_down  # noqa: E402
 from .native import NativeConfig, NativeSimulator  # noqa: E402
 from .params import ParamSpec, model_field  # noqa: E402
+from .trace_cache import ExportedJit, code_fingerprint  # noqa: E402
 from .trajectories import Trajectories  # noqa: E402
 
 # fields MJX reads while tracing (collision pairs, sparsity, solver choice): one value for every slot
@@ -62,7 +66,7 @@ _LEAVE_OUT_WARP = False  # set by leave_out_warp: this process simulates on MJX'
 @dataclasses.dataclass
 class MjxConfig:
     max_abs_qvel: float  # a joint speed beyond this counts as diverged
-    cache_dir: Any  # JAX's persistent compilation cache (str), or None: off
+    cache_dir: Any  # JAX's persistent compilation cache and the traced programs (str), or None: off
     nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: all)
     native_below: int  # batches smaller than this run on native MuJoCo (the tuned model) on CPU threads
     impl: str  # jax, warp, or auto: warp where warp-lang is installed and the GPU is NVIDIA's
@@ -228,9 +232,25 @@ class MjxSimulator(Simulator):
         self.data = jax.device_put(jax.jit(self._blank)(), self._dev)
         self.obs = self._put(np.zeros((num_envs, task.obs_dim)), np.float32)
         self.broken = self._put(np.zeros(num_envs, bool))  # since the last reset
-        self._reset_fn = jax.jit(self._reset_all)
-        self._step_fn = jax.jit(self._control_step)
-        self._rollout_fn = jax.jit(self._scan)  # one compilation per horizon (the actions' shape)
+        jit = self._jit_maker(names, constants, list(on_host))
+        self._reset_fn = jit(self._reset_all, lambda leaves, host, data, obs, broken, *_: (leaves, data, obs, broken))
+        self._step_fn = jit(self._control_step, lambda leaves, data, obs, broken, act: (data, obs, broken, 0, 0, 0))
+        # one compilation per horizon (the actions' shape)
+        self._rollout_fn = jit(self._scan, lambda leaves, data, obs, broken, act: (data, obs, broken, 0, 0, 0, 0, 0))
+
+    def _jit_maker(self, names: list[str], constants: list[str], on_host: list[str]) -> Callable:
+        """jax.jit, or where `cache_dir` is set and MJX runs its JAX implementation, a jit whose traced
+        program is kept across runs (trace_cache.py; MuJoCo Warp's kernels are not exportable). The key:
+        the compiled model and everything else the compiled functions read from this simulator."""
+        if self.cfg.cache_dir is None or self.impl != "jax":
+            return lambda fn, out_like: self.jax.jit(fn)
+        mjb = np.empty(mujoco.mj_sizeModel(self.mj_model), np.uint8)
+        mujoco.mj_saveModel(self.mj_model, None, mjb)
+        described = repr((type(self.task).__module__, type(self.task).__qualname__, self.task.cfg, self.cfg.max_abs_qvel,
+                          self.randomize, names, constants, on_host, self._data_sizes, code_fingerprint()))
+        key = hashlib.sha1(mjb.tobytes() + described.encode()).hexdigest()
+        directory = Path(str(self.cfg.cache_dir)).expanduser() / "traces"
+        return lambda fn, out_like: ExportedJit(fn, f"{fn.__name__}:{key}", directory, out_like)
 
     def _put(self, x: Any, dtype: Any = None) -> Any:
         return self.jax.device_put(np.asarray(x, dtype), self._dev)

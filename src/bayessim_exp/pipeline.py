@@ -87,24 +87,27 @@ class Pipeline:
                       "high": dict(zip(names, map(float, self.comp.task.spec.high)))},
             "rounds": [],
         }
-        for r in range(1, self.rc.rounds + 1):
-            ctx = RoundContext(self.comp, self.run_dir, r, self.rc.seed, self.tb)
-            seconds = {}
-            for stage in self.stages:
-                if run_stage(ctx, stage):
-                    self._shrink_transients(ctx)
-                    if stop_after == (r, stage.name):
-                        return results
-            self._shrink_transients(ctx)  # also what a run killed before its shrink left in a resumed round
-            for stage in self.stages:
-                if self.run_dir.has(r, stage.name):
-                    seconds[stage.name] = round(float(ctx.output(stage.name)["seconds"]), 3)
-            record = self._record(ctx, seconds)
-            results["rounds"].append(record)
-            self.run_dir.write_json("results.json", results)
-            self.tb.scalars(r, _numbers(record))
-        if self._tb is not None:
-            self._tb.close()
+        try:
+            for r in range(1, self.rc.rounds + 1):
+                ctx = RoundContext(self.comp, self.run_dir, r, self.rc.seed, self.tb)
+                seconds = {}
+                for stage in self.stages:
+                    if run_stage(ctx, stage):
+                        self._shrink_transients(ctx)
+                        if stop_after == (r, stage.name):
+                            return results
+                self._shrink_transients(ctx)  # also what a run killed before its shrink left in a resumed round
+                for stage in self.stages:
+                    if self.run_dir.has(r, stage.name):
+                        seconds[stage.name] = round(float(ctx.output(stage.name)["seconds"]), 3)
+                record = self._record(ctx, seconds)
+                results["rounds"].append(record)
+                self.run_dir.write_json("results.json", results)
+                self.tb.scalars(r, _numbers(record))
+        finally:  # also after a failing stage: the figures drawn so far reach TensorBoard
+            if self._tb is not None:
+                self._tb.close()
+                self._tb = None
         return results
 
     def _shrink_transients(self, ctx: RoundContext) -> None:

@@ -64,6 +64,15 @@ def test_results_and_tensorboard_are_written(compose, tmp_path):
     assert "config/text_summary" in events.Tags()["tensors"]
 
 
+def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(tmp_path, caplog):
+    from bayessim_exp.logging.tensorboard import TensorBoardLogger
+
+    tb = TensorBoardLogger(tmp_path)
+    tb._figure("broken", 1, "no_such_plot")
+    tb.close()
+    assert "broken of round 1 could not be drawn" in caplog.text
+
+
 def record_pendulum(tmp_path, params, n=2, horizon=30, seed=7):
     task = registry.build("task", api.compose([]).task)
     sim = registry.build("sim", {"name": "native"})(task, n)

@@ -1,11 +1,40 @@
-"""TensorBoard writer for a run: scalars, loss curves, posterior figures and the config text."""
+"""TensorBoard writer for a run: scalars, loss curves, posterior figures and the config text.
+
+Figures are drawn by a separate process (logging/plots.py, as PNG): importing matplotlib and drawing
+took 2.5-3 s of the default run's stages on the H100 machine, which the run's own process now spends
+on its stages. A thread would not do: it takes the GIL from the stages' many short torch
+calls (measured, docs/benchmarks.md). The figures' data (posterior draws included) is taken in the
+run's process, so its random streams do not depend on the drawing. close() waits for every figure;
+one that fails is reported and left out, never failing the run.
+"""
 
 from __future__ import annotations
 
 import io
+import logging
+import multiprocessing
+from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+def _warm_up() -> None:
+    """In the drawing process, while the run's first stages go on."""
+    from . import plots  # noqa: F401
+
+
+def _png(name: str, *args) -> bytes:
+    """In the drawing process: logging/plots.py's figure `name`, as PNG bytes."""
+    from . import plots
+
+    figure = getattr(plots, name)(*args)
+    out = io.BytesIO()
+    figure.savefig(out, format="png")
+    plots.plt.close(figure)
+    return out.getvalue()
 
 
 class TensorBoardLogger:
@@ -13,6 +42,23 @@ class TensorBoardLogger:
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(log_dir=str(log_dir))
+        # spawn: a forked copy of a process that holds CUDA and JAX state is not safe
+        self._drawing = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+        self._drawing.submit(_warm_up)
+        self._pending: list[tuple[str, int, Future]] = []  # figures being drawn, in the order asked for
+
+    def _figure(self, tag: str, step: int, name: str, *args) -> None:
+        self._pending.append((tag, step, self._drawing.submit(_png, name, *args)))
+        self._add_drawn()
+
+    def _add_drawn(self, wait: bool = False) -> None:
+        """Writes the figures drawn so far (all of them, waiting, with wait=True)."""
+        while self._pending and (wait or self._pending[0][2].done()):
+            tag, step, future = self._pending.pop(0)
+            try:
+                self._image(tag, future.result(), step)
+            except Exception as exc:  # noqa: BLE001 - a figure is not worth a run
+                log.warning("TensorBoard figure %s of round %d could not be drawn: %r", tag, step, exc)
 
     def config(self, yaml_text: str) -> None:
         # four-space indent renders as a code block in TensorBoard's text tab
@@ -26,6 +72,7 @@ class TensorBoardLogger:
         self.writer.add_scalar("loss/best_val_per_round", history["best_val"], round_index)
 
     def scalars(self, round_index: int, values: dict[str, float]) -> None:
+        self._add_drawn()
         for tag, v in values.items():
             if v is not None and np.isfinite(v):
                 self.writer.add_scalar(tag, v, round_index)
@@ -33,36 +80,36 @@ class TensorBoardLogger:
     def posterior(self, round_index: int, posterior, prior, names: list[str], plot_names: list[str],
                   true: np.ndarray | None, num_samples: int, low: np.ndarray, high: np.ndarray) -> None:
         """Pair plot of posterior draws over prior draws; low/high: the parameters' ranges (the axes)."""
-        from .plots import pair_plot
-
         idx = [names.index(n) for n in plot_names]
         samples = posterior.sample((num_samples,)).numpy()[:, idx]
         prior_samples = prior.sample((num_samples,)).numpy()[:, idx]
-        fig = pair_plot(samples, plot_names, np.asarray(low)[idx], np.asarray(high)[idx], None if true is None else true[idx],
-                        f"posterior, round {round_index}", prior_samples)
-        self.writer.add_figure("posterior", fig, round_index)
-        self.writer.flush()
+        self._figure("posterior", round_index, "pair_plot", samples, plot_names, np.asarray(low)[idx],
+                     np.asarray(high)[idx], None if true is None else true[idx], f"posterior, round {round_index}",
+                     prior_samples)
 
     def gif(self, tag: str, gif_bytes: bytes, step: int) -> None:
         """An animated GIF as an image summary (TensorBoard's IMAGES tab plays it), without moviepy."""
+        self._image(tag, gif_bytes, step)
+
+    def _image(self, tag: str, encoded: bytes, step: int) -> None:
+        """An encoded image (PNG, GIF) as an image summary, as it is."""
         from PIL import Image
         from tensorboard.compat.proto.summary_pb2 import Summary
 
-        width, height = Image.open(io.BytesIO(gif_bytes)).size
-        image = Summary.Image(height=height, width=width, colorspace=3, encoded_image_string=gif_bytes)
+        width, height = Image.open(io.BytesIO(encoded)).size
+        image = Summary.Image(height=height, width=width, colorspace=3, encoded_image_string=encoded)
         self.writer._get_file_writer().add_summary(Summary(value=[Summary.Value(tag=tag, image=image)]), step)
         self.writer.flush()
 
     def replays(self, round_index: int, check, obs_names: list[str], max_trajectories: int = 3) -> None:
         """The replayed predictive check (diagnostics/replayed_check.py) as a picture."""
-        from .plots import replay_plot
-
         k = min(max_trajectories, check.real.num)
-        fig = replay_plot(check.real.states[:k].numpy(), check.posterior_states[:k].numpy(),
-                          check.prior_states[:k].numpy(), obs_names, check.real.dt, check.p_value[:k],
-                          f"replayed predictive check, round {round_index}")
-        self.writer.add_figure("predictive/replay", fig, round_index)
-        self.writer.flush()
+        self._figure("predictive/replay", round_index, "replay_plot", check.real.states[:k].numpy(),
+                     check.posterior_states[:k].numpy(), check.prior_states[:k].numpy(), obs_names, check.real.dt,
+                     list(check.p_value[:k]), f"replayed predictive check, round {round_index}")
 
     def close(self) -> None:
+        """Waits for the figures, then closes the drawing process and the event file."""
+        self._add_drawn(wait=True)
+        self._drawing.shutdown()
         self.writer.close()

@@ -7,8 +7,8 @@ vmap) and the fused rollout that was 2.7 s of a 20 s default run on the H100 mac
 later process with the same key calls the exported program instead of tracing.
 
 The key holds everything a trace can depend on: the caller's description of what the function closes
-over (SimTraceKey: the compiled model, the task's config, the settings), the arguments' tree, shapes
-and dtypes, the versions of jax, jaxlib, mujoco and mujoco-mjx, and the source of every module loaded
+over (MjxSimulator: the compiled model, the task's config, the simulator's settings), the arguments'
+tree, shapes and dtypes, the versions of jax, jaxlib, mujoco and mujoco-mjx, and the source of every module loaded
 from outside site-packages (this package, a plugin's tasks): editing any of them traces anew.
 """
 

@@ -68,18 +68,17 @@ class ExportedJit:
 
         self.jax, self.fn, self.key, self.out_like = jax, fn, key, out_like
         self.directory = Path(directory).expanduser()
-        self._programs: dict[tuple, Callable] = {}
+        self._programs: dict[tuple, tuple[Callable, Any]] = {}  # signature -> (program, the result's tree)
         self.traced = 0  # programs traced by this process (the rest were loaded)
 
     def __call__(self, *args):
         tu = self.jax.tree_util
         flat, tree = tu.tree_flatten(args)
         signature = (tree, tuple((x.shape, str(x.dtype)) for x in flat))
-        program = self._programs.get(signature)
-        if program is None:
-            program = self._programs[signature] = self._program(flat, tree, signature)
-        out = program(*flat)
-        return tu.tree_unflatten(tu.tree_structure(self.out_like(*args)), out)
+        if signature not in self._programs:
+            self._programs[signature] = (self._program(flat, tree, signature), tu.tree_structure(self.out_like(*args)))
+        program, out_tree = self._programs[signature]
+        return tu.tree_unflatten(out_tree, program(*flat))
 
     def _program(self, flat: list, tree: Any, signature: tuple) -> Callable:
         jax = self.jax

@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
-import re
 import sys
 import sysconfig
 from collections.abc import Callable
@@ -82,11 +81,12 @@ class ExportedJit:
 
     def _program(self, flat: list, tree: Any, signature: tuple) -> Callable:
         jax = self.jax
-        # object addresses in the tree's static data (MJX wraps numpy arrays) differ between processes; the
-        # arrays themselves come from the model, which the caller's key holds
-        stable = re.sub(r" at 0x[0-9a-f]+", "", str(signature))
+        # the leaves' paths, shapes and dtypes: the tree's static data (MJX's wrapped numpy arrays, whose
+        # text differs between processes) comes from the model, which the caller's key holds
+        paths = [jax.tree_util.keystr(p) for p, _ in jax.tree_util.tree_flatten_with_path(tree.unflatten(flat))[0]]
+        leaves = [(p, x.shape, str(x.dtype)) for p, x in zip(paths, flat)]
         settings = (jax.default_backend(), jax.config.jax_enable_x64, jax.config.jax_default_matmul_precision)
-        digest = hashlib.sha1(f"{self.key}|{stable}|{settings}".encode()).hexdigest()
+        digest = hashlib.sha1(f"{self.key}|{leaves}|{settings}".encode()).hexdigest()
         path = self.directory / f"{digest}.jax_exported"
         if path.exists():
             try:

@@ -75,11 +75,11 @@ class ExportedJit:
         flat, tree = tu.tree_flatten(args)
         signature = (tree, tuple((x.shape, str(x.dtype)) for x in flat))
         if signature not in self._programs:
-            self._programs[signature] = (self._program(flat, tree, signature), tu.tree_structure(self.out_like(*args)))
+            self._programs[signature] = (self._program(flat, tree), tu.tree_structure(self.out_like(*args)))
         program, out_tree = self._programs[signature]
         return tu.tree_unflatten(out_tree, program(*flat))
 
-    def _program(self, flat: list, tree: Any, signature: tuple) -> Callable:
+    def _program(self, flat: list, tree: Any) -> Callable:
         jax = self.jax
         # the leaves' paths, shapes and dtypes: the tree's static data (MJX's wrapped numpy arrays, whose
         # text differs between processes) comes from the model, which the caller's key holds

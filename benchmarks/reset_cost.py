@@ -58,14 +58,15 @@ def main():
     if args.host_constants:  # the fallback for every constant
         mjx_constants.host_reasons = lambda m, names: dict.fromkeys(names, "--host-constants")
     cfg = mjx_sim.MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=0, native_below=0, impl=args.impl)
-    print(f"device {jax.devices()[0]}, sim.impl={mjx_sim.resolve_impl(args.impl)}, {args.envs} slots, median of {args.reps} resets"
+    print(f"device {jax.devices()[0]}, sim.impl={args.impl}, {args.envs} slots, median of {args.reps} resets"
           f"{' (constants on the host)' if args.host_constants else ''}")
-    print(f"{'task':<12} {'wall s':>8} {'compiled s':>11} {'host s':>8}")
+    print(f"{'task':<12} {'impl':<5} {'wall s':>8} {'compiled s':>11} {'host s':>8}")
     for name in args.tasks.split(","):
         task = registry.build("task", api.compose([f"task={name}"]).task)
         params = np.random.default_rng(0).uniform(task.spec.low, task.spec.high, (args.envs, task.spec.dim))
-        wall, compiled = timed_resets(mjx_sim.MjxSimulator(task, args.envs, cfg), params, args.reps)
-        print(f"{name:<12} {wall:8.3f} {compiled:11.3f} {wall - compiled:8.3f}", flush=True)
+        sim = mjx_sim.MjxSimulator(task, args.envs, cfg)
+        wall, compiled = timed_resets(sim, params, args.reps)
+        print(f"{name:<12} {sim.impl:<5} {wall:8.3f} {compiled:11.3f} {wall - compiled:8.3f}", flush=True)
         jax.clear_caches()
 
 

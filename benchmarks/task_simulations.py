@@ -17,7 +17,6 @@ import hashlib
 import time
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import torch
 from omegaconf import OmegaConf
@@ -26,6 +25,7 @@ from bayessim_exp import api, registry
 from bayessim_exp.components import build_components
 from bayessim_exp.run_config import check_run_config
 from bayessim_exp.sim.trajectories import Trajectories
+from bayessim_exp.tasks.base import model_bytes
 
 DEFAULT_CACHE = Path("/tmp/bayessim_inference_tasks")
 _BLOCK = 2048  # simulations per cached block; each block has its own seed
@@ -42,9 +42,7 @@ def fingerprint(task: str) -> str:
     """Of the task's config and compiled model: simulations of an earlier version are not reused."""
     cfg = api.compose([f"task={task}"])
     model = registry.build("task", cfg.task).model
-    mjb = np.empty(mujoco.mj_sizeModel(model), np.uint8)
-    mujoco.mj_saveModel(model, None, mjb)
-    return hashlib.sha1(OmegaConf.to_yaml(cfg.task).encode() + mjb.tobytes()).hexdigest()[:10]
+    return hashlib.sha1(OmegaConf.to_yaml(cfg.task).encode() + model_bytes(model)).hexdigest()[:10]
 
 
 def _simulate_block(comp, block: int, n: int, horizon: int, seed: int) -> tuple[torch.Tensor, Trajectories]:

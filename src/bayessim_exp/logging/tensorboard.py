@@ -2,8 +2,8 @@
 
 Figures are drawn by a separate process (logging/plots.py, as PNG): importing matplotlib and drawing
 took 2.5-3 s of the default run's stages on the H100 machine, which the run's own process now spends
-on its stages. A thread would not do: it takes the GIL from the stages' many short torch
-calls (measured, docs/benchmarks.md). The figures' data (posterior draws included) is taken in the
+on its stages. A drawing thread gained nothing (measured, docs/benchmarks.md), presumably as it
+takes the GIL from the stages' many short torch calls. The figures' data (posterior draws included) is taken in the
 run's process, so its random streams do not depend on the drawing. close() waits for every figure;
 one that fails is reported and left out, never failing the run.
 """
@@ -56,7 +56,7 @@ class TensorBoardLogger:
         while self._pending and (wait or self._pending[0][2].done()):
             tag, step, future = self._pending.pop(0)
             try:
-                self._image(tag, future.result(), step)
+                self.image(tag, future.result(), step)
             except Exception as exc:  # noqa: BLE001 - a figure is not worth a run
                 log.warning("TensorBoard figure %s of round %d could not be drawn: %r", tag, step, exc)
 
@@ -87,12 +87,9 @@ class TensorBoardLogger:
                      np.asarray(high)[idx], None if true is None else true[idx], f"posterior, round {round_index}",
                      prior_samples)
 
-    def gif(self, tag: str, gif_bytes: bytes, step: int) -> None:
-        """An animated GIF as an image summary (TensorBoard's IMAGES tab plays it), without moviepy."""
-        self._image(tag, gif_bytes, step)
-
-    def _image(self, tag: str, encoded: bytes, step: int) -> None:
-        """An encoded image (PNG, GIF) as an image summary, as it is."""
+    def image(self, tag: str, encoded: bytes, step: int) -> None:
+        """An encoded image (PNG; an animated GIF, which TensorBoard's IMAGES tab plays, without moviepy)
+        as an image summary, as it is."""
         from PIL import Image
         from tensorboard.compat.proto.summary_pb2 import Summary
 

@@ -107,7 +107,7 @@ class PPOComponent:
             if out["video"] is None:
                 log.warning("round %d: no video of the policy: %s", ctx.round, why)
         if ctx.tb is not None and out["video"] is not None:  # the returns reach TensorBoard through record()
-            ctx.tb.gif("rl/surrogate_real_video", out["video"], ctx.round)
+            ctx.tb.image("rl/surrogate_real_video", out["video"], ctx.round)
         log.info("round %d: surrogate real return %.1f (min %.1f, max %.1f) over %d episodes", ctx.round,
                  out["summary"]["mean"], out["summary"]["min"], out["summary"]["max"], e.episodes)
         return out

@@ -43,7 +43,7 @@ from mujoco import batch as mjbatch  # noqa: E402
 
 from ..errors import ConfigError  # noqa: E402
 from ..registry import register  # noqa: E402
-from ..tasks.base import Task  # noqa: E402
+from ..tasks.base import Task, model_bytes  # noqa: E402
 from .base import Policy, Simulator, broke_down  # noqa: E402
 from .native import NativeConfig, NativeSimulator  # noqa: E402
 from .params import ParamSpec, model_field  # noqa: E402
@@ -84,7 +84,7 @@ IMPLS = ("auto", "jax", "warp")
 def resolve_impl(impl: str, task: Task | None = None) -> str:
     """MJX's implementation for `impl` on this machine; warp asked for where it cannot run is an error.
     auto: the task's `mjx_tuning.impl` where it names one (docs/tasks.md), else Warp where it can run."""
-    if impl == "jax" or (impl == "auto" and task is not None and _prefers_jax(task.cfg.mjx_tuning)):
+    if _jax_chosen(impl, task.cfg.mjx_tuning if task is not None else {}):
         return "jax"
     import jax
 
@@ -101,8 +101,9 @@ def resolve_impl(impl: str, task: Task | None = None) -> str:
     return "jax"
 
 
-def _prefers_jax(mjx_tuning: Mapping) -> bool:
-    return mjx_tuning.get("impl") == "jax"
+def _jax_chosen(impl: str, mjx_tuning: Mapping) -> bool:
+    """sim.impl=jax, or auto where the task's tuning prefers JAX: decided without asking the machine."""
+    return impl == "jax" or (impl == "auto" and mjx_tuning.get("impl") == "jax")
 
 
 def leave_out_warp(impl: str, mjx_tuning: Mapping) -> bool:
@@ -112,7 +113,7 @@ def leave_out_warp(impl: str, mjx_tuning: Mapping) -> bool:
     importing MJX on the H100 machine, docs/benchmarks.md). Processes that may simulate another task
     later (--multirun, the Python API) keep MJX's own import. Returns whether Warp is left out."""
     global _LEAVE_OUT_WARP
-    _LEAVE_OUT_WARP = impl == "jax" or (impl == "auto" and _prefers_jax(mjx_tuning))
+    _LEAVE_OUT_WARP = _jax_chosen(impl, mjx_tuning)
     return _LEAVE_OUT_WARP
 
 
@@ -244,11 +245,9 @@ class MjxSimulator(Simulator):
         the compiled model and everything else the compiled functions read from this simulator."""
         if self.cfg.cache_dir is None or self.impl != "jax":
             return lambda fn, out_like: self.jax.jit(fn)
-        mjb = np.empty(mujoco.mj_sizeModel(self.mj_model), np.uint8)
-        mujoco.mj_saveModel(self.mj_model, None, mjb)
         described = repr((type(self.task).__module__, type(self.task).__qualname__, self.task.cfg, self.cfg.max_abs_qvel,
                           self.randomize, names, constants, on_host, self._data_sizes, code_fingerprint()))
-        key = hashlib.sha1(mjb.tobytes() + described.encode()).hexdigest()
+        key = hashlib.sha1(model_bytes(self.mj_model) + described.encode()).hexdigest()
         directory = Path(str(self.cfg.cache_dir)).expanduser() / "traces"
         return lambda fn, out_like: ExportedJit(fn, f"{fn.__name__}:{key}", directory, out_like)
 

@@ -30,6 +30,13 @@ WARP_BUFFERS = {"contacts_per_env": 48, "constraints_per_env": 64}
 MJX_TUNING = (*MODEL_TUNING, *WARP_BUFFERS, "impl")
 
 
+def model_bytes(model: mujoco.MjModel) -> bytes:
+    """The compiled model as MuJoCo saves it (MJB): equal bytes, equal model, for cache keys."""
+    out = np.empty(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, out)
+    return out.tobytes()
+
+
 @dataclasses.dataclass
 class TaskConfig:
     """Fields every task config has; tasks subclass it to add their own."""

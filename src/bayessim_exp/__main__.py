@@ -6,7 +6,10 @@ task function returns the last round's log-density gain at the true parameters (
 or failed), so Hydra sweepers such as Optuna can optimise it.
 """
 
+import atexit
+import logging
 import math
+import os
 import sys
 
 import hydra
@@ -53,12 +56,27 @@ def _app(cfg: DictConfig) -> float:
 
 
 def main() -> None:
+    finished = []
+    atexit.register(_exit_before_finalization, finished)  # the first registered: runs after every other handler
     _app()
     if job_failures.failed:
         print(f"{len(job_failures.failed)} job(s) failed (their error.txt says why):", file=sys.stderr)
         for job_dir in job_failures.failed:
             print(f"  {job_dir}", file=sys.stderr)
         sys.exit(1)
+    finished.append(True)
+
+
+def _exit_before_finalization(finished: list) -> None:
+    """After a successful command, skip the interpreter's finalization: it spent about a second tearing
+    down JAX's and torch's GPU clients on the lent H100 machine (docs/benchmarks.md). Every result is
+    written by then, worker threads and processes are joined and the other exit handlers have run;
+    logging's own handler, registered before this one, is called here."""
+    if finished:
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
 
 
 if __name__ == "__main__":

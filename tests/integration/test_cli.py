@@ -47,8 +47,12 @@ def test_multirun_goes_on_past_a_failing_job_and_names_it(tmp_path):
 
 
 PLUGIN = '''
+import atexit
 import dataclasses
+import pathlib
 from bayessim_exp.registry import register
+
+atexit.register(lambda: pathlib.Path("exit_handler_ran").write_text("yes"))
 
 
 @dataclasses.dataclass
@@ -83,3 +87,7 @@ def test_a_component_registered_outside_the_package(tmp_path):
     assert proc.returncode == 0, proc.stderr
     results = json.loads((tmp_path / "run" / "results.json").read_text())
     assert results["summarizer"] == "final_state" and results["run_name"] == "Pendulum_bayessim_mdnn_final_state_random_seed0"
+    # the process leaves before the interpreter's finalization: output, log and exit handlers are complete
+    assert "log p(true | real) - log p(true)" in proc.stdout
+    assert "round 1: score done" in (tmp_path / "run" / "__main__.log").read_text()
+    assert (tmp_path / "exit_handler_ran").read_text() == "yes"

@@ -29,3 +29,19 @@ def test_the_same_parameters_as_torch_optim_adam(fused):
     theirs = _train(lambda p: torch.optim.Adam(p, lr=1e-2, weight_decay=1e-3, fused=True if fused else None))
     assert torch.equal(ours, theirs)
 
+
+
+def test_a_finite_loss_with_a_non_finite_gradient_is_named():
+    """sqrt at 0: the loss is 0, its gradient infinite; training stops at the first such step."""
+    from types import SimpleNamespace
+
+    from bayessim_exp.errors import TrainingError
+    from bayessim_exp.models.adam_steps import EagerAdamSteps
+
+    net = torch.nn.Linear(2, 1)
+    nll = lambda theta, x: torch.sqrt((net(x) - net(x).detach()).abs()).squeeze(-1)  # noqa: E731
+    cfg = SimpleNamespace(batch_size=8, lr=1e-3, weight_decay=0.0)
+    steps = EagerAdamSteps(net, nll, torch.zeros(32, 1), torch.randn(32, 2), cfg, "round 2")
+    steps.epoch(torch.arange(32))
+    with pytest.raises(TrainingError, match=r"round 2: non-finite gradient at epoch 0, step 1$"):
+        steps.finish_epoch(0, steps.validation_loss(torch.arange(8)))

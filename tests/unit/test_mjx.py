@@ -161,7 +161,7 @@ def test_mjx_is_imported_without_warp_where_the_job_leaves_it_out(impl, tmp_path
     out = subprocess.run([sys.executable, "-c", _IMPORT_MJX, impl], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert marker.exists() == (impl == "auto")
-    assert "Failed to import" not in out.stdout or impl == "auto"  # MJX's print of the blocked import is swallowed
+    assert "Failed to import" not in out.stdout  # MJX's prints of failed Warp imports are swallowed
 
 
 def test_slots_whose_constraint_rows_overflow_warp_count_as_diverged(compose):

@@ -16,6 +16,7 @@ log-uniform, truncated Gaussian). Under the prior u is exactly standard normal, 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 from torch.special import ndtr, ndtri
@@ -80,6 +81,23 @@ class ProbitTransform:
 
     def from_probit(self, u: torch.Tensor) -> torch.Tensor:
         return self._inverse_cdf(ndtr(u.double())).clamp(self.low, self.high)
+
+    def log_prior_peak(self) -> float:
+        """The prior's largest log density on its box."""
+        p = self.prior
+        at = p.loc.clamp(self.low, self.high) if isinstance(p, GaussianPrior) else self.low
+        return float(self._log_marginals(at).sum())
+
+    def prior_between(self, low_u: torch.Tensor, high_u: torch.Tensor) -> tuple[float, Callable[..., torch.Tensor]]:
+        """The prior restricted to the probit box [low_u, high_u]: (its prior mass, sample(n, generator)),
+        exact by the inverse CDF on the box's range of CDF values."""
+        c_low, c_high = ndtr(low_u.double()), ndtr(high_u.double())
+
+        def sample(n: int, generator: torch.Generator | None = None) -> torch.Tensor:
+            c = c_low + torch.rand(n, self.dim, dtype=torch.float64, generator=generator) * (c_high - c_low)
+            return self._inverse_cdf(c).clamp(self.low, self.high)
+
+        return float((c_high - c_low).prod()), sample
 
     def log_abs_det_jacobian(self, theta: torch.Tensor) -> torch.Tensor:
         """log |du/dtheta| = sum_d log p_d(theta_d) - log phi(u_d): [...]."""

@@ -3,16 +3,18 @@
 A density network's step is many small kernels; launched one by one from Python they leave a GPU
 idle most of the time (on the lent H100 machine an eager GPU epoch was slower than the CPU's).
 Captured once into a CUDA graph, a step is one launch (a whole epoch in one graph measured slower,
-docs/benchmarks.md). The graphed step reads its rows through a fixed index buffer, so every batch has the same size: the
-last batch of an epoch is filled up with rows from the epoch's start.
+docs/benchmarks.md). The graphed step reads its rows through a fixed index buffer, so every batch has
+the same size: the last batch of an epoch is filled up with rows from the epoch's start. The
+validation loss gets a graph of its own.
 
-Both keep the first non-finite loss or gradient on the device, read once per epoch: a read per step
-would stall a GPU at every batch.
+Both keep the losses and the first non-finite loss or gradient on the device and read them once per
+epoch, in one transfer: each read waits for the GPU to finish its queue.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 
 import torch
@@ -34,9 +36,8 @@ class EagerAdamSteps:
         # on a GPU the fused Adam: one kernel for every parameter's update instead of several per tensor
         self.opt = Adam(self.params, lr=cfg.lr, weight_decay=cfg.weight_decay, capturable=capturable)
         self.step = torch.zeros((), dtype=torch.long, device=dev)
-        self.bad_loss_step = torch.full((), -1, dtype=torch.long, device=dev)
-        self.bad_grad_step = torch.full((), -1, dtype=torch.long, device=dev)
-        self.bad_loss = torch.zeros((), device=dev)
+        self.bad_step = torch.full((), -1, dtype=torch.long, device=dev)  # the first with a non-finite loss or gradient
+        self.bad_loss = torch.zeros((), device=dev)  # its loss
         self.total = torch.zeros((), device=dev)
 
     def _step(self, rows: torch.Tensor) -> None:
@@ -44,12 +45,11 @@ class EagerAdamSteps:
         loss = self.nll(self.theta[rows], self.x[rows]).mean()
         loss.backward()
         self.step += 1
-        first = (self.bad_loss_step < 0) & ~torch.isfinite(loss)
-        self.bad_loss_step.copy_(torch.where(first, self.step, self.bad_loss_step))
-        self.bad_loss.copy_(torch.where(first, loss.detach(), self.bad_loss))
         grad_norm = torch.nn.utils.get_total_norm([p.grad for p in self.params if p.grad is not None])
-        grad_ok = torch.isfinite(grad_norm) | ~torch.isfinite(loss)
-        self.bad_grad_step.copy_(torch.where((self.bad_grad_step < 0) & ~grad_ok, self.step, self.bad_grad_step))
+        # one test for both (every kernel counts in a step of a small network): the sum is finite iff both are
+        first = (self.bad_step < 0) & ~torch.isfinite(loss.detach() + grad_norm)
+        self.bad_step.copy_(torch.where(first, self.step, self.bad_step))
+        self.bad_loss.copy_(torch.where(first, loss.detach(), self.bad_loss))
         self.opt.step()
         self.total += loss.detach() * len(rows)
 
@@ -60,21 +60,28 @@ class EagerAdamSteps:
         self.opt.zero_grad()
         self._step(rows)
 
-    def epoch(self, order: torch.Tensor) -> float:
-        """Steps over the rows in `order`; the mean training loss."""
+    def epoch(self, order: torch.Tensor) -> None:
+        """Steps over the rows in `order` (on a GPU only launched: finish_epoch reads the results)."""
         self.total.zero_()
-        count = 0
+        self.count = 0
         for rows in self._batches(order):
             self._run(rows)
-            count += len(rows)
-        return self.total.item() / count
+            self.count += len(rows)
 
-    def raise_if_not_finite(self, epoch: int) -> None:
-        if self.bad_loss_step >= 0:
-            raise TrainingError(f"{self.label}: loss became {self.bad_loss.item()} at epoch {epoch}, "
-                                f"step {int(self.bad_loss_step)}")
-        if self.bad_grad_step >= 0:
-            raise TrainingError(f"{self.label}: non-finite gradient at epoch {epoch}, step {int(self.bad_grad_step)}")
+    @torch.no_grad()
+    def validation_loss(self, rows: torch.Tensor) -> torch.Tensor:
+        """The mean loss on `rows` (the same rows every epoch), left on the device."""
+        return self.nll(self.theta[rows], self.x[rows]).mean()
+
+    def finish_epoch(self, epoch: int, validation_loss: torch.Tensor) -> tuple[float, float]:
+        """(mean training loss, validation loss) of the epoch, read in one transfer (each read waits for
+        the GPU); raises TrainingError at the first non-finite loss or gradient."""
+        total, val, step, loss = torch.stack([self.total.double(), validation_loss.double(), self.bad_step.double(),
+                                              self.bad_loss.double()]).tolist()
+        if step >= 0:
+            what = f"loss became {loss}" if not math.isfinite(loss) else "non-finite gradient"
+            raise TrainingError(f"{self.label}: {what} at epoch {epoch}, step {int(step)}")
+        return total / self.count, val
 
 
 class GraphedAdamSteps(EagerAdamSteps):
@@ -88,6 +95,9 @@ class GraphedAdamSteps(EagerAdamSteps):
         self.graph: torch.cuda.CUDAGraph | None = None
         self.eager_steps = 0
         self.capture_failed = False
+        self.validation_graph: torch.cuda.CUDAGraph | None = None
+        self.validation_out: torch.Tensor | None = None
+        self.eager_validations = 0
 
     def _batches(self, order: torch.Tensor) -> list[torch.Tensor]:
         short = -len(order) % self.batch_size
@@ -115,17 +125,34 @@ class GraphedAdamSteps(EagerAdamSteps):
 
     def _capture(self) -> None:
         self.opt.zero_grad()
+        self.graph = self._captured(lambda: self._step(self.rows), "training step")
+        self.capture_failed = self.graph is None
+
+    def validation_loss(self, rows: torch.Tensor) -> torch.Tensor:
+        """Replayed from a graph of its own once the training step is captured (an eager forward pass
+        each epoch is dozens of launches with the GPU idle); `rows` must be the same tensor every epoch."""
+        if self.validation_graph is None and self.graph is not None and self.eager_validations == _WARMUP_STEPS:
+            def forward() -> None:
+                self.validation_out = EagerAdamSteps.validation_loss(self, rows)
+
+            self.validation_graph = self._captured(forward, "validation loss")
+        if self.validation_graph is None:
+            self.eager_validations += 1  # past the warm-up without a graph: eager for good
+            return super().validation_loss(rows)
+        self.validation_graph.replay()
+        return self.validation_out
+
+    def _captured(self, work: Callable[[], None], what: str) -> torch.cuda.CUDAGraph | None:
         graph = torch.cuda.CUDAGraph()
         try:
             # thread_local: JAX's threads may call CUDA meanwhile; only this thread's calls must be capturable
             with torch.cuda.graph(graph, capture_error_mode="thread_local"):
-                self._step(self.rows)
+                work()
         except RuntimeError as exc:
-            log.info("%s: the training step cannot be captured in a CUDA graph (%s); training eagerly",
-                     self.label, str(exc).splitlines()[0])
-            self.capture_failed = True
-            return
-        self.graph = graph
+            log.info("%s: the %s cannot be captured in a CUDA graph (%s); running it eagerly",
+                     self.label, what, str(exc).splitlines()[0])
+            return None
+        return graph
 
 
 def adam_steps(net, nll, theta, x, cfg, label) -> EagerAdamSteps:

@@ -166,14 +166,14 @@ def train_density(
     best, best_state, since_best = math.inf, None, 0
     history: dict[str, list[float]] = {"train": [], "val": []}
     bar = tqdm(range(cfg.max_epochs), desc=f"fit {label}".strip(), leave=False, delay=2, disable=None)
+    order = train_idx[torch.randperm(len(train_idx), generator=g)]
     for epoch in bar:
         net.train()
-        order = train_idx[torch.randperm(len(train_idx), generator=g)].to(theta.device)
-        train_loss = steps.epoch(order)
-        steps.raise_if_not_finite(epoch)
+        steps.epoch(order.to(theta.device))
         net.eval()
-        with torch.no_grad():
-            val = nll(theta[val_idx], x[val_idx]).mean().item()
+        val_loss = steps.validation_loss(val_idx)
+        order = train_idx[torch.randperm(len(train_idx), generator=g)]  # the next epoch's, while a GPU works
+        train_loss, val = steps.finish_epoch(epoch, val_loss)
         if not math.isfinite(val):
             raise TrainingError(f"{label}: validation loss became {val} at epoch {epoch}, step {int(steps.step)}")
         history["train"].append(train_loss)

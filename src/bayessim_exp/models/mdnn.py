@@ -74,17 +74,19 @@ class MixtureHead(nn.Module):
         self.dim, self.k, self.full = dim, components, full
         self.n_off = dim * (dim - 1) // 2 if full else 0
         self.out = nn.Linear(in_dim, components * (1 + 2 * dim + self.n_off))
-        self.register_buffer("triu", torch.triu_indices(dim, dim, offset=1), persistent=False)
+        # where U's entries land in its flattened rows: the diagonal, then the strict upper triangle
+        upper = torch.triu_indices(dim, dim, offset=1) if full else torch.zeros(2, 0, dtype=torch.long)
+        self.register_buffer("positions", torch.cat([torch.arange(dim) * (dim + 1), upper[0] * dim + upper[1]]),
+                             persistent=False)
 
     def forward(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         k, d = self.k, self.dim
         out = self.out(h)
         logits, means, log_diag, off = torch.split(out, [k, k * d, k * d, k * self.n_off], -1)
-        U = torch.diag_embed(torch.exp(log_diag.reshape(-1, k, d).clamp(-12, 12)))
-        if self.full:
-            upper = torch.zeros_like(U)
-            upper[:, :, self.triu[0], self.triu[1]] = off.reshape(-1, k, self.n_off)
-            U = U + upper
+        # one scatter into zeros (few kernels: a training step of this small network is launch-bound)
+        diagonal = torch.exp(log_diag.reshape(-1, k, d).clamp(-12, 12))
+        entries = torch.cat([diagonal, off.reshape(len(out), k, self.n_off)], -1)
+        U = out.new_zeros(len(out), k, d * d).index_copy(-1, self.positions, entries).reshape(-1, k, d, d)
         return logits, means.reshape(-1, k, d), U
 
 

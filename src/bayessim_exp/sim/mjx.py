@@ -120,15 +120,19 @@ def leave_out_warp(impl: str, mjx_tuning: Mapping) -> bool:
 def import_mjx() -> Any:
     """mujoco.mjx, imported without MuJoCo Warp where leave_out_warp decided so (and nothing else
     imported warp-lang before)."""
-    if (_LEAVE_OUT_WARP and "mujoco.mjx" not in sys.modules and "warp" not in sys.modules
-            and importlib.util.find_spec("warp") is not None):
-        sys.modules["warp"] = None  # type: ignore[assignment]  # `import warp` fails: MJX records Warp as absent
+    if "mujoco.mjx" not in sys.modules:
+        leave_out = _LEAVE_OUT_WARP and "warp" not in sys.modules and importlib.util.find_spec("warp") is not None
+        if leave_out:
+            sys.modules["warp"] = None  # type: ignore[assignment]  # `import warp` fails: MJX records Warp as absent
         try:
-            with contextlib.redirect_stdout(io.StringIO()):  # MJX prints the failed imports
+            # MJX prints every failed import of Warp (as on an install without warp-lang) and Warp its banner
+            with contextlib.redirect_stdout(io.StringIO()):
                 import mujoco.mjx  # noqa: F401
         finally:
-            del sys.modules["warp"]
-        log.info("sim=mjx: MJX imported without MuJoCo Warp (this run simulates with MJX's JAX implementation)")
+            if leave_out:
+                del sys.modules["warp"]
+        if leave_out:
+            log.info("sim=mjx: MJX imported without MuJoCo Warp (this run simulates with MJX's JAX implementation)")
     from mujoco import mjx
 
     return mjx
@@ -140,7 +144,8 @@ def jax_setup(cache_dir: str | None) -> Any:
 
     if cache_dir:
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache_dir)))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        # every program, the small ones too: together they took 0.3 s of a warm run to compile again
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
     return jax
 
 

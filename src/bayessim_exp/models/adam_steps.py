@@ -38,7 +38,8 @@ class EagerAdamSteps:
         self.step = torch.zeros((), dtype=torch.long, device=dev)
         self.bad_step = torch.full((), -1, dtype=torch.long, device=dev)  # the first with a non-finite loss or gradient
         self.bad_loss = torch.zeros((), device=dev)  # its loss
-        self.total = torch.zeros((), device=dev)
+        self.total = torch.zeros((), device=dev)  # of the epoch's losses, each times its batch size
+        self.count = 0  # the epoch's rows
 
     def _step(self, rows: torch.Tensor) -> None:
         """One Adam step on `rows`; every write goes into a tensor made beforehand (graph-safe)."""

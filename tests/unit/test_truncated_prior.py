@@ -20,10 +20,10 @@ PRIORS = {
 }
 
 
-def _narrow_mixture(scale: float = 1.0) -> GaussianMixture:
+def _narrow_mixture() -> GaussianMixture:
     covs = torch.tensor([[[0.004, 0.001], [0.001, 0.002]], [[0.001, 0.0], [0.0, 0.003]], [[0.002, -0.001], [-0.001, 0.002]]])
     return GaussianMixture(torch.tensor([0.0, -0.5, 0.3]), torch.tensor([[0.1, 0.0], [0.2, 0.05], [0.05, -0.1]]),
-                           scale * covs)
+                           covs)
 
 
 @pytest.mark.parametrize("over_standard_normal", [False, True])

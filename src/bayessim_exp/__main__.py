@@ -7,15 +7,14 @@ or failed), so Hydra sweepers such as Optuna can optimise it.
 """
 
 import atexit
-import logging
 import math
-import os
 import sys
 
 import hydra
 from omegaconf import DictConfig
 
 from . import job_failures
+from .quick_exit import exit_without_finalization
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="config")
@@ -68,15 +67,10 @@ def main() -> None:
 
 
 def _exit_before_finalization(finished: list) -> None:
-    """After a successful command, skip the interpreter's finalization: it spent about a second tearing
-    down JAX's and torch's GPU clients on the lent H100 machine (docs/benchmarks.md). Every result is
-    written by then, worker threads and processes are joined and the other exit handlers have run;
-    logging's own handler, registered before this one, is called here."""
+    """After a successful command only: every result is written and worker threads and processes are
+    joined by the time the exit handlers run."""
     if finished:
-        logging.shutdown()
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(0)
+        exit_without_finalization()
 
 
 if __name__ == "__main__":

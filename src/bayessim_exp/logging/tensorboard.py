@@ -3,9 +3,9 @@
 Figures are drawn by a separate process (logging/plots.py, as PNG): importing matplotlib and drawing
 took 2.5-3 s of the default run's stages on the H100 machine, which the run's own process now spends
 on its stages. A drawing thread gained nothing (measured, docs/benchmarks.md), presumably as it
-takes the GIL from the stages' many short torch calls. The figures' data (posterior draws included) is taken in the
-run's process, so its random streams do not depend on the drawing. close() waits for every figure;
-one that fails is reported and left out, never failing the run.
+takes the GIL from the stages' many short torch calls. The figures' data (posterior draws included)
+is taken in the run's process, so its random streams do not depend on the drawing. close() waits for
+every figure; one that fails is reported and left out, never failing the run.
 """
 
 from __future__ import annotations
@@ -14,26 +14,19 @@ import atexit
 import io
 import logging
 import multiprocessing
-import os
-import sys
 from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from ..quick_exit import exit_without_finalization
+
 log = logging.getLogger(__name__)
 
 
-def _exit_without_finalization() -> None:
-    """In the drawing process, which has nothing to write at its end: its interpreter's teardown
-    (matplotlib's modules) took a quarter of a second at the end of every run (close() waits for it)."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(0)
-
-
 def _drawing_process_setup() -> None:
-    atexit.register(_exit_without_finalization)
+    """The drawing process has nothing to write at its end; close() waits for it to end."""
+    atexit.register(exit_without_finalization)
 
 
 def _warm_up() -> None:

@@ -7,6 +7,7 @@ never switch on the concrete class:
     sample(shape, generator=None) -> float64 [*shape, D]
     log_prob(theta)       -> float64 [...], -inf outside the support
     mean, stddev          float64 [D]; Monte Carlo with a fixed seed unless a subclass knows them exactly
+    superlevel_box(level) a box around {log_prob >= level}, or None (truncated proposals sample within it)
     save(path), load(path)
 """
 
@@ -36,6 +37,11 @@ class ParameterDistribution:
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
+
+    def superlevel_box(self, level: float) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """A box (low, high) in parameter units holding every theta with log_prob(theta) >= level; None
+        where none is known (here, and for every distribution that does not say otherwise)."""
+        return None
 
     @functools.cached_property
     def _moments(self) -> tuple[torch.Tensor, torch.Tensor]:

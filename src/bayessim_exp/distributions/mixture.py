@@ -226,6 +226,9 @@ class TruncatedMixture(ParameterDistribution):
             )
         self._generator = torch.Generator().manual_seed(seed + 1)
 
+    def superlevel_box(self, level: float) -> tuple[torch.Tensor, torch.Tensor] | None:
+        return self.mixture.superlevel_box(level + self._log_mass)
+
     @property
     def log_mass_inside(self) -> float:
         return self._log_mass

@@ -4,10 +4,10 @@ Deistler et al. 2022: on that region prior / proposal is constant, so a model tr
 needs no proposal correction: q(theta | x) restricted to the prior's support is the posterior,
 provided the region holds (nearly) all of the posterior's mass, which `hpd_mass` sets.
 
-Sampling is by rejection. Where the posterior is a Gaussian mixture (in probit space, or truncated
-to the prior's box) the candidates come from the prior restricted to a box that provably holds the
-region (`GaussianMixture.superlevel_box`): a concentrated posterior's region may hold a thousandth
-of the prior and a good share of that box. Otherwise they come from the whole prior.
+Sampling is by rejection. Where the posterior knows a box that holds the region (its
+`superlevel_box`: Gaussian mixtures, in probit space or truncated to the prior's box) the candidates
+come from the prior restricted to that box: Pendulum's round-3 region holds 1 % of the prior and half
+of the box. Otherwise they come from the whole prior.
 """
 
 from __future__ import annotations
@@ -18,8 +18,7 @@ from collections.abc import Callable
 import torch
 
 from .base import ParameterDistribution
-from .mixture import GaussianMixture, TruncatedMixture
-from .probit import ProbitPosterior, ProbitTransform
+from .probit import ProbitTransform
 from .rejection import sample_by_rejection
 
 # the candidates' box is widened by this much (relative) so that rounding never cuts off the region's rim
@@ -73,7 +72,7 @@ class TruncatedPrior(ParameterDistribution):
 def _candidates(prior, posterior, threshold: float) -> tuple[float, Callable[..., torch.Tensor]]:
     """(prior mass, sample(n, generator)) of the prior restricted to a box holding
     {theta: posterior.log_prob(theta) >= threshold}; the whole prior where no box is known."""
-    box = _region_box(posterior, threshold)
+    box = posterior.superlevel_box(threshold) if isinstance(posterior, ParameterDistribution) else None
     try:
         transform = ProbitTransform(prior)
     except ValueError:
@@ -83,16 +82,3 @@ def _candidates(prior, posterior, threshold: float) -> tuple[float, Callable[...
     low_u, high_u = (transform.to_probit(bound) for bound in box)  # clamped into the prior's box
     margin = _BOX_MARGIN * (1 + torch.maximum(low_u.abs(), high_u.abs()))
     return transform.prior_between(low_u - margin, high_u + margin)
-
-
-def _region_box(posterior, threshold: float) -> tuple[torch.Tensor, torch.Tensor] | None:
-    """A box in parameter units holding {theta: posterior.log_prob(theta) >= threshold}, where the
-    posterior is a Gaussian mixture mapped from probit space or truncated to a box; else None."""
-    if isinstance(posterior, ProbitPosterior) and isinstance(posterior.inner, GaussianMixture):
-        # log posterior = log q_u(u) - log N(u; 0, I) + log prior(theta) <= that + the prior's peak
-        transform = posterior.transform
-        box = posterior.inner.superlevel_box(threshold - transform.log_prior_peak(), over_standard_normal=True)
-        return None if box is None else tuple(transform.from_probit(bound) for bound in box)  # monotone per coordinate
-    if isinstance(posterior, TruncatedMixture):
-        return posterior.mixture.superlevel_box(threshold + posterior.log_mass_inside)
-    return None

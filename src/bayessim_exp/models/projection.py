@@ -18,16 +18,25 @@ _FOLDS = 5
 
 
 class RidgeSystem:
-    """The normal equations of [z, 1] W = y, formed once, solved for any penalty and any rows left out
-    (a fold's Gram matrix is subtracted rather than recomputed: thousands of features are common)."""
+    """[z, 1] W = y with the intercept unpenalised, solved for any penalty and any rows left out.
+
+    With more rows than features, the normal equations are formed once and a fold's Gram matrix is
+    subtracted rather than recomputed. With more features than rows (signature summaries give thousands),
+    the same weights come from the dual: on data centred by the fitted rows' means (which makes the
+    intercept unpenalised), w = Zc^T (Zc Zc^T + penalty I)^-1 Yc, a rows-by-rows system.
+    """
 
     def __init__(self, z: torch.Tensor, y: torch.Tensor):
         self.design = torch.cat([z.double(), torch.ones(len(z), 1, dtype=torch.float64, device=z.device)], 1)
         self.y = y.double()
-        self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
+        self.dual = z.shape[1] > len(z)
+        if not self.dual:
+            self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
 
     def solve(self, penalty: float, leave_out: torch.Tensor | None = None) -> torch.Tensor:
         """[F + 1, D] weights (last row: intercept, not penalised), fitted without the rows `leave_out` (bool)."""
+        if self.dual:
+            return self._solve_dual(penalty, leave_out)
         gram, moment = self.gram, self.moment
         if leave_out is not None:
             d = self.design[leave_out]
@@ -35,6 +44,17 @@ class RidgeSystem:
         reg = penalty * torch.ones(gram.shape[0], dtype=gram.dtype, device=gram.device)
         reg[-1] = 0.0
         return torch.linalg.solve(gram + torch.diag(reg), moment)
+
+    def _solve_dual(self, penalty: float, leave_out: torch.Tensor | None) -> torch.Tensor:
+        z, y = self.design[:, :-1], self.y
+        if leave_out is not None:
+            z, y = z[~leave_out], y[~leave_out]
+        z_mean, y_mean = z.mean(0), y.mean(0)
+        zc = z - z_mean
+        kernel = zc @ zc.T
+        kernel.diagonal().add_(penalty)
+        w = zc.T @ torch.linalg.solve(kernel, y - y_mean)
+        return torch.cat([w, (y_mean - z_mean @ w)[None]])
 
     def predict(self, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
         return self.design[rows] @ weights

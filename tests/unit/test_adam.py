@@ -41,7 +41,7 @@ def test_a_finite_loss_with_a_non_finite_gradient_is_named():
     net = torch.nn.Linear(2, 1)
     nll = lambda theta, x: torch.sqrt((net(x) - net(x).detach()).abs()).squeeze(-1)  # noqa: E731
     cfg = SimpleNamespace(batch_size=8, lr=1e-3, weight_decay=0.0)
-    steps = EagerAdamSteps(net, nll, torch.zeros(32, 1), torch.randn(32, 2), cfg, "round 2")
+    steps = EagerAdamSteps(net, nll, torch.zeros(32, 1), torch.randn(32, 2), cfg, "round 2", rows_per_epoch=32)
     steps.epoch(torch.arange(32))
     with pytest.raises(TrainingError, match=r"round 2: non-finite gradient at epoch 0, step 1$"):
         steps.finish_epoch(0, steps.validation_loss(torch.arange(8)))

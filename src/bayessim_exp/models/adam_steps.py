@@ -7,8 +7,8 @@ docs/benchmarks.md). The graphed step reads its rows through a fixed index buffe
 the same size: the last batch of an epoch is filled up with rows from the epoch's start. The
 validation loss gets a graph of its own.
 
-Both keep the losses and the first non-finite loss or gradient on the device and read them once per
-epoch, in one transfer: each read waits for the GPU to finish its queue.
+Both keep every step's loss and gradient norms on the device and read them once per epoch, in one
+transfer: each read waits for the GPU to finish its queue.
 """
 
 from __future__ import annotations
@@ -29,30 +29,27 @@ _WARMUP_STEPS = 3  # eager steps on a side stream before capture (CUDA graphs ne
 
 class EagerAdamSteps:
     def __init__(self, net: torch.nn.Module, nll: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
-                 theta: torch.Tensor, x: torch.Tensor, cfg, label: str, capturable: bool = False):
+                 theta: torch.Tensor, x: torch.Tensor, cfg, label: str, rows_per_epoch: int, capturable: bool = False):
         dev = theta.device
         self.nll, self.theta, self.x, self.batch_size, self.label = nll, theta, x, cfg.batch_size, label
         self.params = [p for p in net.parameters() if p.requires_grad]
         # on a GPU the fused Adam: one kernel for every parameter's update instead of several per tensor
         self.opt = Adam(self.params, lr=cfg.lr, weight_decay=cfg.weight_decay, capturable=capturable)
-        self.step = torch.zeros((), dtype=torch.long, device=dev)
-        self.bad_step = torch.full((), -1, dtype=torch.long, device=dev)  # the first with a non-finite loss or gradient
-        self.bad_loss = torch.zeros((), device=dev)  # its loss
-        self.total = torch.zeros((), device=dev)  # of the epoch's losses, each times its batch size
-        self.count = 0  # the epoch's rows
+        self.steps_done = 0
+        self.batch_rows: list[int] = []  # of the epoch's steps
+        # each step of the epoch writes its loss and its gradients' norms into its row (read once per epoch;
+        # testing them on the device would cost a dozen kernels a step)
+        self.record = torch.zeros(math.ceil(rows_per_epoch / cfg.batch_size), 1 + len(self.params), device=dev)
+        self.slot = torch.zeros(1, dtype=torch.long, device=dev)  # the row of the next step
 
     def _step(self, rows: torch.Tensor) -> None:
         """One Adam step on `rows`; every write goes into a tensor made beforehand (graph-safe)."""
         loss = self.nll(self.theta[rows], self.x[rows]).mean()
         loss.backward()
-        self.step += 1
-        grad_norm = torch.nn.utils.get_total_norm([p.grad for p in self.params if p.grad is not None])
-        # one test for both (every kernel counts in a step of a small network): the sum is finite iff both are
-        first = (self.bad_step < 0) & ~torch.isfinite(loss.detach() + grad_norm)
-        self.bad_step.copy_(torch.where(first, self.step, self.bad_step))
-        self.bad_loss.copy_(torch.where(first, loss.detach(), self.bad_loss))
+        norms = torch._foreach_norm([p.grad if p.grad is not None else p.new_zeros(()) for p in self.params])
+        self.record.index_copy_(0, self.slot, torch.stack([loss.detach(), *norms])[None])
+        self.slot += 1
         self.opt.step()
-        self.total += loss.detach() * len(rows)
 
     def _batches(self, order: torch.Tensor) -> list[torch.Tensor]:
         return list(order.split(self.batch_size))
@@ -63,11 +60,11 @@ class EagerAdamSteps:
 
     def epoch(self, order: torch.Tensor) -> None:
         """Steps over the rows in `order` (on a GPU only launched: finish_epoch reads the results)."""
-        self.total.zero_()
-        self.count = 0
+        self.slot.zero_()
+        self.batch_rows = []
         for rows in self._batches(order):
             self._run(rows)
-            self.count += len(rows)
+            self.batch_rows.append(len(rows))
 
     @torch.no_grad()
     def validation_loss(self, rows: torch.Tensor) -> torch.Tensor:
@@ -77,20 +74,24 @@ class EagerAdamSteps:
     def finish_epoch(self, epoch: int, validation_loss: torch.Tensor) -> tuple[float, float]:
         """(mean training loss, validation loss) of the epoch, read in one transfer (each read waits for
         the GPU); raises TrainingError at the first non-finite loss or gradient."""
-        total, val, step, loss = torch.stack([self.total.double(), validation_loss.double(), self.bad_step.double(),
-                                              self.bad_loss.double()]).tolist()
-        if step >= 0:
-            what = f"loss became {loss}" if not math.isfinite(loss) else "non-finite gradient"
-            raise TrainingError(f"{self.label}: {what} at epoch {epoch}, step {int(step)}")
-        return total / self.count, val
+        values = torch.cat([validation_loss.reshape(1), self.record.flatten()]).tolist()
+        val, width = values[0], self.record.shape[1]
+        records = [values[1 + i * width:1 + (i + 1) * width] for i in range(len(self.batch_rows))]
+        first_step = self.steps_done + 1
+        self.steps_done += len(records)
+        for i, (loss, *norms) in enumerate(records):
+            if not all(map(math.isfinite, norms)) or not math.isfinite(loss):
+                what = f"loss became {loss}" if not math.isfinite(loss) else "non-finite gradient"
+                raise TrainingError(f"{self.label}: {what} at epoch {epoch}, step {first_step + i}")
+        return sum(r[0] * n for r, n in zip(records, self.batch_rows)) / sum(self.batch_rows), val
 
 
 class GraphedAdamSteps(EagerAdamSteps):
     """The first steps run eagerly on a side stream, the next one is captured; all later ones replay it.
     A network whose step cannot be captured (an operation that reads back to the host) goes on eagerly."""
 
-    def __init__(self, net, nll, theta, x, cfg, label):
-        super().__init__(net, nll, theta, x, cfg, label, capturable=True)
+    def __init__(self, net, nll, theta, x, cfg, label, rows_per_epoch):
+        super().__init__(net, nll, theta, x, cfg, label, rows_per_epoch, capturable=True)
         self.batch_size = min(cfg.batch_size, len(theta))
         self.rows = torch.zeros(self.batch_size, dtype=torch.long, device=theta.device)
         self.graph: torch.cuda.CUDAGraph | None = None
@@ -156,6 +157,7 @@ class GraphedAdamSteps(EagerAdamSteps):
         return graph
 
 
-def adam_steps(net, nll, theta, x, cfg, label) -> EagerAdamSteps:
-    cls = GraphedAdamSteps if theta.device.type == "cuda" else EagerAdamSteps
-    return cls(net, nll, theta, x, cfg, label)
+def adam_steps(net, nll, theta, x, cfg, label, rows_per_epoch: int) -> EagerAdamSteps:
+    if theta.device.type == "cuda":
+        return GraphedAdamSteps(net, nll, theta, x, cfg, label, rows_per_epoch)
+    return EagerAdamSteps(net, nll, theta, x, cfg, label, rows_per_epoch)

@@ -162,7 +162,7 @@ def train_density(
 
     val_idx, train_idx, g = validation_split(theta.shape[0], cfg.val_fraction, seed, label)
     val_idx = val_idx.to(theta.device)
-    steps = adam_steps(net, nll, theta, x, cfg, label)
+    steps = adam_steps(net, nll, theta, x, cfg, label, len(train_idx))
     best, best_state, since_best = math.inf, None, 0
     history: dict[str, list[float]] = {"train": [], "val": []}
     bar = tqdm(range(cfg.max_epochs), desc=f"fit {label}".strip(), leave=False, delay=2, disable=None)
@@ -175,7 +175,7 @@ def train_density(
         order = train_idx[torch.randperm(len(train_idx), generator=g)]  # the next epoch's, while a GPU works
         train_loss, val = steps.finish_epoch(epoch, val_loss)
         if not math.isfinite(val):
-            raise TrainingError(f"{label}: validation loss became {val} at epoch {epoch}, step {int(steps.step)}")
+            raise TrainingError(f"{label}: validation loss became {val} at epoch {epoch}, step {steps.steps_done}")
         history["train"].append(train_loss)
         history["val"].append(val)
         if on_epoch is not None:

@@ -28,6 +28,7 @@ from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError
 from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
+from .mixture_nll import LOG_DIAGONAL_BOUND, HeadNLL, mixture_nll
 from .projection import RidgeProjection
 
 _CALIBRATION_ROWS = 4096  # validation pairs the spread is fitted on (plenty for one factor per parameter)
@@ -78,16 +79,22 @@ class MixtureHead(nn.Module):
         upper = torch.triu_indices(dim, dim, offset=1) if full else torch.zeros(2, 0, dtype=torch.long)
         self.register_buffer("positions", torch.cat([torch.arange(dim) * (dim + 1), upper[0] * dim + upper[1]]),
                              persistent=False)
+        self.register_buffer("upper_rows", upper[0].contiguous(), persistent=False)
+        self.register_buffer("upper_cols", upper[1].contiguous(), persistent=False)
 
     def forward(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         k, d = self.k, self.dim
         out = self.out(h)
         logits, means, log_diag, off = torch.split(out, [k, k * d, k * d, k * self.n_off], -1)
         # one scatter into zeros (few kernels: a training step of this small network is launch-bound)
-        diagonal = torch.exp(log_diag.reshape(-1, k, d).clamp(-12, 12))
+        diagonal = torch.exp(log_diag.reshape(-1, k, d).clamp(-LOG_DIAGONAL_BOUND, LOG_DIAGONAL_BOUND))
         entries = torch.cat([diagonal, off.reshape(len(out), k, self.n_off)], -1)
         U = out.new_zeros(len(out), k, d * d).index_copy(-1, self.positions, entries).reshape(-1, k, d, d)
         return logits, means.reshape(-1, k, d), U
+
+    def nll(self, h: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
+        """-log q(theta_n | h_n) [N], straight from the outputs (training: few kernels, models/mixture_nll.py)."""
+        return HeadNLL.apply(self.out(h), theta, self.upper_rows, self.upper_cols, self.k)
 
 
 class SpreadScale(nn.Module):
@@ -100,13 +107,6 @@ class SpreadScale(nn.Module):
     def scale_factors(self, U: torch.Tensor, log_scale: torch.Tensor | None = None) -> torch.Tensor:
         """Precision factors of the rescaled components: U diag(1 / scale), still upper triangular."""
         return U * torch.exp(-(self.log_scale if log_scale is None else log_scale))
-
-
-def mixture_nll(logits: torch.Tensor, means: torch.Tensor, U: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
-    z = (U @ (theta[:, None, :] - means).unsqueeze(-1)).squeeze(-1)
-    log_det = torch.log(torch.diagonal(U, dim1=-2, dim2=-1)).sum(-1)
-    comp = log_det - 0.5 * (z**2).sum(-1) - 0.5 * means.shape[-1] * math.log(2 * math.pi)
-    return -torch.logsumexp(torch.log_softmax(logits, -1) + comp, -1)
 
 
 class MDNN(StandardizedDensityModel):
@@ -136,7 +136,8 @@ class MDNN(StandardizedDensityModel):
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         # the mean of the members' own losses: each member has its own gradients (early stopping is shared)
         h = self.embedding(x_std)
-        return torch.stack([mixture_nll(*member(h), theta_std) for member in self.members]).mean(0)
+        losses = [member[-1].nll(member[:-1](h), theta_std) for member in self.members]
+        return losses[0] if len(losses) == 1 else torch.stack(losses).mean(0)
 
     def _mixtures(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The members' mixtures side by side, equally weighted: log weights [N, M], means [N, M, D],

@@ -6,7 +6,9 @@
 Synthetic pairs (x = A theta + noise) of the pipeline's default size; every fit runs exactly
 `--epochs` epochs (patience = epochs), so rows compare the same work. Rows per model: `cpu` (the
 baseline, the machine's torch threads), `cuda eager` (one kernel launch at a time) and `cuda graph`
-(the step replayed from a CUDA graph, what the pipeline does with device=cuda).
+(the step replayed from a CUDA graph, what the pipeline does with device=cuda). Mixture models (mdnn,
+mdrff) get a `matrix loss` row per device as well: the loss by autograd through the assembled precision
+factors (`mixture_nll`) instead of the head's loss with its written-out gradient (`HeadNLL`).
 """
 
 from __future__ import annotations
@@ -16,8 +18,15 @@ import time
 
 import torch
 
-from bayessim_exp.models import adam_steps, base
+from bayessim_exp.models import adam_steps, base, mdnn
+from bayessim_exp.models.mixture_nll import mixture_nll
 from bayessim_exp.registry import build
+
+HEAD_NLL = mdnn.MixtureHead.nll
+
+
+def matrix_form_nll(head: mdnn.MixtureHead, h: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
+    return mixture_nll(*head(h), theta)
 
 
 def pairs(n: int, theta_dim: int, x_dim: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -27,9 +36,11 @@ def pairs(n: int, theta_dim: int, x_dim: int) -> tuple[torch.Tensor, torch.Tenso
     return theta, theta @ a + 0.1 * torch.randn(n, x_dim, generator=g)
 
 
-def timed_fit(name: str, cfg: dict, theta: torch.Tensor, x: torch.Tensor, device: str, graphed: bool) -> float:
+def timed_fit(name: str, cfg: dict, theta: torch.Tensor, x: torch.Tensor, device: str, graphed: bool,
+              matrix_loss: bool = False) -> float:
     # the eager row swaps the step factory: the same fit with one launch per kernel
     base.adam_steps = adam_steps.adam_steps if graphed else adam_steps.EagerAdamSteps
+    mdnn.MixtureHead.nll = matrix_form_nll if matrix_loss else HEAD_NLL
     model = build("model", {"name": name, **cfg}, theta_dim=theta.shape[1], x_dim=x.shape[1])
     theta, x = theta.to(device), x.to(device)
     if device == "cuda":
@@ -54,18 +65,22 @@ def main() -> None:
     variants = [("cpu", "cpu", False)]
     if torch.cuda.is_available():
         variants += [("cuda eager", "cuda", False), ("cuda graph", "cuda", True)]
-    for _, device, graphed in variants:  # one-time costs (imports, CUDA context, kernel loading) before timing
-        timed_fit(args.models[0], {**cfg, "max_epochs": 1}, theta[:1000], x[:1000], device, graphed)
+    for name in args.models:  # one-time costs (imports, CUDA context, kernel loading) before timing
+        for _, device, graphed in variants:
+            timed_fit(name, {**cfg, "max_epochs": 1}, theta[:1000], x[:1000], device, graphed)
     print(f"{args.sims} pairs, theta {args.theta_dim}-D, x {args.x_dim}-D, batch {args.batch_size}, "
           f"{args.epochs} epochs; torch {torch.__version__}, {torch.get_num_threads()} CPU threads"
           + (f", {torch.cuda.get_device_name()}" if torch.cuda.is_available() else ""))
-    print(f"{'model':<8} {'where':<12} {'s per epoch':>12} {'vs cpu':>8}")
+    print(f"{'model':<8} {'where':<26} {'s per epoch':>12} {'vs cpu':>8}")
     for name in args.models:
         baseline = None
+        mixture = name in ("mdnn", "mdrff")
         for label, device, graphed in variants:
-            per_epoch = timed_fit(name, cfg, theta, x, device, graphed) / args.epochs
-            baseline = baseline or per_epoch
-            print(f"{name:<8} {label:<12} {per_epoch:>12.4f} {baseline / per_epoch:>7.1f}x", flush=True)
+            for matrix_loss in (False, True) if mixture else (False,):
+                per_epoch = timed_fit(name, cfg, theta, x, device, graphed, matrix_loss) / args.epochs
+                baseline = baseline or per_epoch
+                label_ = f"{label}, matrix loss" if matrix_loss else label
+                print(f"{name:<8} {label_:<26} {per_epoch:>12.4f} {baseline / per_epoch:>7.1f}x", flush=True)
 
 
 if __name__ == "__main__":

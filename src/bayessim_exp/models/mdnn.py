@@ -86,7 +86,7 @@ class MixtureHead(nn.Module):
         k, d = self.k, self.dim
         out = self.out(h)
         logits, means, log_diag, off = torch.split(out, [k, k * d, k * d, k * self.n_off], -1)
-        # one scatter into zeros (few kernels: a training step of this small network is launch-bound)
+        # U by one scatter into zeros (conditioning and the checks; training reads `out` directly, `nll`)
         diagonal = torch.exp(log_diag.reshape(-1, k, d).clamp(-LOG_DIAGONAL_BOUND, LOG_DIAGONAL_BOUND))
         entries = torch.cat([diagonal, off.reshape(len(out), k, self.n_off)], -1)
         U = out.new_zeros(len(out), k, d * d).index_copy(-1, self.positions, entries).reshape(-1, k, d, d)

@@ -60,19 +60,20 @@ class HeadNLL(torch.autograd.Function):
         # so that a far component's large |comp| does not cancel
         log_r_max, top = log_r.max(-1, keepdim=True)
         nll = (log_r_max - (log_w + comp).gather(-1, top)).squeeze(-1) + 0.5 * dim * math.log(2 * math.pi)
-        ctx.save_for_backward(log_w, log_r, z, z_diag, scale, diff, diff_cols, off, log_diag, log_diag_raw, rows, cols)
+        inside = log_diag == log_diag_raw  # where the clamp passes gradients
+        ctx.save_for_backward(log_w, log_r, z, z_diag, scale, diff, diff_cols, off, inside, rows, cols)
         return nll
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, grad: torch.Tensor):
-        log_w, log_r, z, z_diag, scale, diff, diff_cols, off, log_diag, log_diag_raw, rows, cols = ctx.saved_tensors
+        log_w, log_r, z, z_diag, scale, diff, diff_cols, off, inside, rows, cols = ctx.saved_tensors
         n, k, dim = diff.shape
         g = grad[:, None]
         neg_gr = log_r.exp() * -g  # d/dcomp
         d_logits = torch.addcmul(neg_gr, log_w.exp(), g)
         neg_dz = neg_gr[..., None] * z  # -d/dz
-        d_log_diag = torch.addcmul(neg_gr[..., None], neg_dz, z_diag, value=-1) * (log_diag == log_diag_raw)
+        d_log_diag = torch.addcmul(neg_gr[..., None], neg_dz, z_diag, value=-1) * inside
         d_means = neg_dz * scale
         parts = [d_logits, d_means, d_log_diag]
         if len(rows):

@@ -139,7 +139,7 @@ def main() -> None:
             print(f"{spec}: conditioning failed: {exc}", flush=True)
             rows.append((spec, None, fit_seconds, fitted.history.get("epochs")))
             continue
-        result["guard"] = check_posterior(result["mean_gain"], result["coverage"])
+        result["guard"] = check_posterior(result["mean_gain"], result["coverage"], result["cases"])
         rows.append((spec, result, fit_seconds, fitted.history.get("epochs")))
         r = result
         print(f"{spec}: gain mean {r['mean_gain']:+.2f} median {r['median_gain']:+.2f} worse {r['worse']:.0%} "

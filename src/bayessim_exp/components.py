@@ -13,6 +13,7 @@ from .distributions.base import ParameterDistribution
 from .errors import ConfigError
 from .run_config import RunConfig
 from .sim.pool import SimulatorPool
+from .sim.trajectories import Trajectories
 from .tasks.base import Task
 
 
@@ -34,10 +35,12 @@ class Components:
         return torch.device(self.rc.device)
 
     def policy(self, seed: int, ctx=None):
-        """The collect policy, seeded; within a round (ctx) `rl`/`rl_randomized` act with the latest trained actor."""
+        """The collect policy, seeded; within a round (ctx) `rl`/`rl_randomized` act with the latest trained
+        actor and `replay` replays the real trajectories recorded so far."""
         actor = self.rl.actor(ctx) if self.rl is not None and ctx is not None else None
+        recorded = Trajectories(**ctx.output("real")["traj"]) if ctx is not None and ctx.has("real") else None
         return registry.build("policy", self.cfg.policy, action_dim=self.task.action_dim, seed=seed,
-                              control_dt=self.task.cfg.control_dt, actor=actor)
+                              control_dt=self.task.cfg.control_dt, actor=actor, recorded=recorded, task=self.task)
 
     def model(self):
         """A fresh posterior model q(theta | x) for this task and summarizer."""
@@ -60,7 +63,7 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     x_dim = summarizer.output_dim(task.obs_dim, task.action_dim, rc.collect.horizon)
     registry.parse_params("policy", cfg.policy)
     registry.parse_params("model", cfg.model)
-    real = registry.build("real", cfg.real, task=task, sims=sims)
+    real = registry.build("real", cfg.real, task=task, sims=sims, prior=prior, seed=rc.seed)
     real.check(rc.collect.horizon)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)

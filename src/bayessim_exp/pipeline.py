@@ -20,7 +20,7 @@ from . import registry
 from .artifacts import RunDir
 from .components import Components, build_components
 from .diagnostics.scoring import score
-from .errors import ConfigError
+from .errors import ConfigError, PosteriorError
 from .run_config import check_run_config
 from .sim.trajectories import Trajectories
 from .stages import RoundContext, Stage, check_stages, run_stage
@@ -71,7 +71,7 @@ class Pipeline:
         spec = self.comp.task.spec
         ctx.tb.posterior(ctx.round, posterior, self.comp.prior, names, plot_names, true, lc.plot_samples,
                          spec.low, spec.high)
-        return score(posterior, self.comp.prior, names, true)
+        return score(posterior, self.comp.prior, names, true, ctx.seed)
 
     # the loop ------------------------------------------------------------------------
     def run(self, stop_after: tuple[int, str] | None = None) -> dict:
@@ -104,6 +104,9 @@ class Pipeline:
                 results["rounds"].append(record)
                 self.run_dir.write_json("results.json", results)
                 self.tb.scalars(r, _numbers(record))
+                reason = self.comp.method.stop_reason(ctx)
+                if reason is not None:
+                    raise PosteriorError(reason)
         finally:  # also after a failing stage: the figures drawn so far reach TensorBoard
             if self._tb is not None:
                 self._tb.close()
@@ -133,14 +136,17 @@ class Pipeline:
 
 
 def _numbers(record: dict, prefix: str = "") -> dict[str, float]:
-    """Numeric leaves of a round's record as TensorBoard tags (nested keys joined by '/')."""
+    """A round's record as TensorBoard tags (nested keys joined by '/'): numbers as they are, verdicts
+    (booleans) as 0/1 and lists of findings (warnings, reasons) by their count."""
     out: dict[str, float] = {}
     for key, value in record.items():
         tag = f"{prefix}{key}"
         if isinstance(value, dict):
             out.update(_numbers(value, tag + "/"))
-        elif isinstance(value, (int, float, np.floating)) and not isinstance(value, bool) and key != "round":
+        elif isinstance(value, (bool, int, float, np.floating)) and key != "round":
             out[tag] = float(value)
+        elif isinstance(value, list) and value and all(isinstance(v, str) for v in value):
+            out[tag] = float(len(value))
     return out
 
 

@@ -1,8 +1,13 @@
 """Collect policies: batched `act(obs [N, S], t) -> actions [N, A]` in [-1, 1].
 
-Every factory is called as `factory(cfg, action_dim=, seed=, control_dt=, actor=)`; `actor` is the RL
-component's latest trained actor (None before the first train_policy stage, or with rl=none). A policy
-of your own is a factory registered the same way (README: "Your own components").
+Every factory is called as `factory(cfg, action_dim=, seed=, control_dt=, actor=, recorded=, task=)`;
+`actor` is the RL component's latest trained actor (None before the first train_policy stage, or with
+rl=none), `recorded` the real trajectories recorded so far (None before the first real stage) and
+`task` the run's task. A policy of your own is a factory registered the same way (README: "Your own
+components").
+
+A policy may also fix how each simulation starts: `plan(n) -> (OpenLoopPolicy, initial states or None)`
+(the replay policy); SimulatorPool.rollout asks for that plan before simulating.
 """
 
 from __future__ import annotations
@@ -50,13 +55,64 @@ def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int, **_: obje
 
 class OpenLoopPolicy:
     """Recorded actions [N, T, A] played step by step, whatever the observations (replaying real
-    trajectories in simulation)."""
+    trajectories in simulation), row n in slot n."""
 
     def __init__(self, actions: torch.Tensor):
         self.actions = actions
 
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         return self.actions[:, t].to(obs.device)
+
+    def open_loop_actions(self, n: int, horizon: int) -> torch.Tensor:
+        if n != len(self.actions):
+            raise ValueError(f"{len(self.actions)} recorded action sequences for {n} slots")
+        return self.actions[:, :horizon]
+
+    def select(self, rows: torch.Tensor | slice) -> OpenLoopPolicy:
+        """The policy of some slots only (a chunk of a long rollout)."""
+        return OpenLoopPolicy(self.actions[rows])
+
+
+@dataclasses.dataclass
+class ReplayPolicyConfig:
+    action_noise: float  # std of the Gaussian added to each recorded (normalised) action, then clipped
+
+    def validate(self) -> None:
+        if self.action_noise < 0:
+            raise ConfigError(f"action_noise must be >= 0, got {self.action_noise}")
+
+
+class ReplayPolicy:
+    """Every simulation driven like a real trajectory: one drawn at random among the recorded ones, its
+    initial state (where the task maps an observation to a state; else the task's reset distribution)
+    and its actions, perturbed by `action_noise` so that the simulated summaries vary around the real
+    ones rather than repeat them (docs/statistics.md, 'Simulations driven like the real system')."""
+
+    def __init__(self, cfg: ReplayPolicyConfig, recorded, task, seed: int):
+        self.cfg, self.recorded, self.task = cfg, recorded, task
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def plan(self, n: int) -> tuple[OpenLoopPolicy, dict[str, np.ndarray] | None]:
+        """For n simulations: the actions each replays and their initial states (None: the reset distribution)."""
+        if self.recorded is None:
+            raise ConfigError("policy=replay replays recorded real trajectories, and none is recorded yet: use it "
+                              "with real data that carry their actions (real=file), or another collect policy")
+        which = torch.randint(self.recorded.num, (n,), generator=self.generator)
+        actions = self.recorded.actions[which].float().cpu()
+        if self.cfg.action_noise > 0:
+            noise = torch.randn(actions.shape, generator=self.generator) * self.cfg.action_noise
+            actions = (actions + noise).clamp(-1.0, 1.0)
+        start = self.task.state_from_observation(self.recorded.states[which, 0].double().cpu().numpy())
+        return OpenLoopPolicy(actions), start
+
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        raise ConfigError("policy=replay drives batches of simulations through SimulatorPool.rollout "
+                          "(its plan fixes each simulation's start), not step by step")
+
+
+@register("policy", "replay", ReplayPolicyConfig)
+def replay_policy(cfg: ReplayPolicyConfig, seed: int, recorded=None, task=None, **_: object) -> ReplayPolicy:
+    return ReplayPolicy(cfg, recorded, task, seed)
 
 
 @dataclasses.dataclass

@@ -24,18 +24,25 @@ from .errors import ConfigError, DataError
 from .registry import register
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
+from .stages import stage_seed
 from .tasks.base import Task
 
 log = logging.getLogger(__name__)
 
 
+TRUTHS = ("task", "prior")
+
+
 @dataclasses.dataclass
 class SurrogateConfig:
     per_round: int
+    truth: str  # task: the task's real_params | prior: drawn from the prior with the run's seed
 
     def validate(self) -> None:
         if self.per_round < 1:
             raise ConfigError(f"per_round must be >= 1, got {self.per_round}")
+        if self.truth not in TRUTHS:
+            raise ConfigError(f"truth={self.truth!r} not allowed; allowed: {', '.join(TRUTHS)}")
 
 
 @dataclasses.dataclass
@@ -44,13 +51,19 @@ class FileConfig:
 
 
 class SurrogateReal:
-    """A simulated 'real' system with the task's real_params, which the inference never sees."""
+    """A simulated 'real' system whose parameters the inference never sees: the task's real_params, or
+    (truth=prior) a draw from the prior seeded by the run's seed, so that a sweep over seeds is a
+    known-truth calibration study (sweeps/calibration.yaml)."""
 
     fingerprint = None  # nothing outside the config to bind to the run dir
 
-    def __init__(self, cfg: SurrogateConfig, task: Task, sims: SimulatorPool):
+    def __init__(self, cfg: SurrogateConfig, task: Task, sims: SimulatorPool, prior, seed: int):
         self.cfg, self.task, self.sims = cfg, task, sims
-        self.true_params: np.ndarray | None = task.real_values
+        if cfg.truth == "prior":
+            draw = prior.sample((1,), generator=torch.Generator().manual_seed(stage_seed(seed, 0, "truth")))
+            self.true_params: np.ndarray | None = draw[0].double().numpy()
+        else:
+            self.true_params = task.real_values
 
     def check(self, horizon: int) -> None:
         """Nothing to check: the task's config was validated when it was built."""
@@ -176,10 +189,10 @@ def save_trajectories(path: str | Path, traj: Trajectories, params: np.ndarray |
 
 
 @register("real", "surrogate", SurrogateConfig)
-def surrogate(cfg: SurrogateConfig, task: Task, sims: SimulatorPool) -> SurrogateReal:
-    return SurrogateReal(cfg, task, sims)
+def surrogate(cfg: SurrogateConfig, task: Task, sims: SimulatorPool, prior, seed: int, **_: object) -> SurrogateReal:
+    return SurrogateReal(cfg, task, sims, prior, seed)
 
 
 @register("real", "file", FileConfig)
-def from_file(cfg: FileConfig, task: Task, sims: SimulatorPool) -> FileReal:
+def from_file(cfg: FileConfig, task: Task, **_: object) -> FileReal:
     return FileReal(cfg, task)

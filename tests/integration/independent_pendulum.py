@@ -1,17 +1,23 @@
-"""A pendulum written independently of the project's MJCF: the ODE integrated finely with RK4.
+"""A pendulum written independently of the project's MJCF: the ODE integrated by other integrators.
 
-Stands in for a robot's logs in the real-data tests and in benchmarks/real_data.py. Conventions
+Stands in for a robot's logs in the real-data tests and in benchmarks/foreign_dynamics.py. Conventions
 are those docs/tasks.md states for Pendulum: angle 0 upright, positive rotation and torque in the
 same sense, gravity pushing away from upright, actions in [-1, 1] scaled to a 2 N m torque range.
 
-    rod:  I theta'' = m g (L/2) sin(theta) + u - b theta',   I = m L^2 / 3
-    bob:  I theta'' = m g L sin(theta) + u - b theta',       I = m L^2       (a point mass at L)
+    rod:  I theta'' = m g (L/2) sin(theta) + tau - b theta' - c sign(theta'),   I = m L^2 / 3
+    bob:  I theta'' = m g L sin(theta) + tau - b theta' - c sign(theta'),       I = m L^2  (a point mass at L)
+    motor: tau = 2 N m * action, or with a lag T: tau' = (2 N m * action - tau) / T
+
+Our model (MuJoCo, implicit-fast at 0.01 s) is the rod with b = c = 0 and no lag; integrators and
+time steps differ here: classic RK4 (`rk4`, 50 substeps per 0.05 s control step), semi-implicit Euler
+at a fifth of our time step (`euler`), and SciPy's adaptive Dormand-Prince (`scipy`, rtol 1e-9).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
+from scipy.integrate import solve_ivp
 from scipy.optimize import minimize
 
 from bayessim_exp.diagnostics.replay import replay
@@ -19,44 +25,87 @@ from bayessim_exp.diagnostics.replay import replay
 GRAVITY = 9.81
 TORQUE_RANGE = 2.0
 CONTROL_DT = 0.05
+INTEGRATORS = ("rk4", "euler", "scipy")
+EXCITATIONS = ("random", "sine")
+
+
+def excitation(kind: str, n: int, horizon: int, rng: np.random.Generator) -> np.ndarray:
+    """Actions [n, horizon, 1]: uniform random, as the collect policy draws them, or a sine per trajectory
+    (amplitude 0.6-1, 0.3-1.5 Hz, random phase), as an excitation experiment on a robot would."""
+    if kind == "random":
+        return rng.uniform(-1.0, 1.0, (n, horizon, 1))
+    if kind != "sine":
+        raise ValueError(kind)
+    t = np.arange(horizon) * CONTROL_DT
+    amplitude, freq, phase = rng.uniform(0.6, 1.0, (n, 1)), rng.uniform(0.3, 1.5, (n, 1)), rng.uniform(0, 2 * np.pi, (n, 1))
+    return (amplitude * np.sin(2 * np.pi * freq * t + phase))[..., None]
 
 
 def simulate(mass: float, length: float, n: int, horizon: int, seed: int, *, damping: float = 0.0,
-             shape: str = "rod", substeps: int = 50, angle_offset: float = 0.0) -> dict[str, np.ndarray]:
+             friction: float = 0.0, motor_lag: float = 0.0, shape: str = "rod", integrator: str = "rk4",
+             substeps: int = 50, angle_offset: float = 0.0, actions: str = "random") -> dict[str, np.ndarray]:
     """n trajectories of `horizon` control steps in the npz layout of real=file.
 
-    Initial states and actions are drawn as the collect policy draws them (theta ~ U(-pi, pi),
-    theta' ~ U(-1, 1), actions ~ U(-1, 1)). angle_offset adds a constant to the logged angle (a log
-    that measures the angle from another zero)."""
+    Initial states are drawn as the task's reset draws them (theta ~ U(-pi, pi), theta' ~ U(-1, 1)),
+    actions by `excitation`. angle_offset adds a constant to the logged angle (a log that measures the
+    angle from another zero)."""
     if shape == "rod":
         lever, inertia = length / 2, mass * length**2 / 3
     elif shape == "bob":
         lever, inertia = length, mass * length**2
     else:
         raise ValueError(shape)
+    if integrator not in INTEGRATORS:
+        raise ValueError(integrator)
     rng = np.random.default_rng(seed)
     theta = rng.uniform(-np.pi, np.pi, n)
     omega = rng.uniform(-1.0, 1.0, n)
-    actions = rng.uniform(-1.0, 1.0, (n, horizon, 1))
-    h = CONTROL_DT / substeps
+    acts = excitation(actions, n, horizon, rng)
+    torque = np.zeros(n)
 
-    def accel(th, om, torque):
-        return (mass * GRAVITY * lever * np.sin(th) + torque - damping * om) / inertia
+    def derivative(th, om, tq, command):
+        accel = (mass * GRAVITY * lever * np.sin(th) + tq - damping * om - friction * np.tanh(om / 1e-2)) / inertia
+        return om, accel, (command - tq) / motor_lag if motor_lag else np.zeros_like(tq)
 
     states = np.empty((n, horizon + 1, 3))
     states[:, 0] = _observe(theta + angle_offset, omega)
     for t in range(horizon):
-        torque = TORQUE_RANGE * actions[:, t, 0]
-        for _ in range(substeps):  # classic RK4 on (theta, omega)
-            k1t, k1o = omega, accel(theta, omega, torque)
-            k2t, k2o = omega + h / 2 * k1o, accel(theta + h / 2 * k1t, omega + h / 2 * k1o, torque)
-            k3t, k3o = omega + h / 2 * k2o, accel(theta + h / 2 * k2t, omega + h / 2 * k2o, torque)
-            k4t, k4o = omega + h * k3o, accel(theta + h * k3t, omega + h * k3o, torque)
-            theta = theta + h / 6 * (k1t + 2 * k2t + 2 * k3t + k4t)
-            omega = omega + h / 6 * (k1o + 2 * k2o + 2 * k3o + k4o)
+        command = TORQUE_RANGE * acts[:, t, 0]
+        if not motor_lag:
+            torque = command
+        theta, omega, torque = _advance(derivative, theta, omega, torque, command, integrator, substeps)
         states[:, t + 1] = _observe(theta + angle_offset, omega)
-    return {"states": states, "actions": actions, "dt": np.array(CONTROL_DT),
+    return {"states": states, "actions": acts, "dt": np.array(CONTROL_DT),
             "params": np.array([mass, length]), "param_names": np.array(["mass", "length"])}
+
+
+def _advance(derivative, theta, omega, torque, command, integrator: str, substeps: int):
+    """One control step of (theta, omega, torque) under a held command."""
+    if integrator == "scipy":
+        n = len(theta)
+
+        def rhs(_, y):
+            return np.concatenate(derivative(y[:n], y[n : 2 * n], y[2 * n :], command))
+
+        y = solve_ivp(rhs, (0.0, CONTROL_DT), np.concatenate([theta, omega, torque]), method="DOP853",
+                      rtol=1e-9, atol=1e-9).y[:, -1]
+        return y[:n], y[n : 2 * n], y[2 * n :]
+    if integrator == "euler":  # semi-implicit: velocity first, at a fifth of our 0.01 s time step
+        h = CONTROL_DT / 25
+        for _ in range(25):
+            _, accel, dtorque = derivative(theta, omega, torque, command)
+            omega = omega + h * accel
+            theta, torque = theta + h * omega, torque + h * dtorque
+        return theta, omega, torque
+    h = CONTROL_DT / substeps
+    for _ in range(substeps):  # classic RK4
+        k1 = derivative(theta, omega, torque, command)
+        k2 = derivative(*(v + h / 2 * k for v, k in zip((theta, omega, torque), k1)), command)
+        k3 = derivative(*(v + h / 2 * k for v, k in zip((theta, omega, torque), k2)), command)
+        k4 = derivative(*(v + h * k for v, k in zip((theta, omega, torque), k3)), command)
+        theta, omega, torque = (v + h / 6 * (a + 2 * b + 2 * c + d)
+                                for v, a, b, c, d in zip((theta, omega, torque), k1, k2, k3, k4))
+    return theta, omega, torque
 
 
 def _observe(theta: np.ndarray, omega: np.ndarray) -> np.ndarray:

@@ -1,19 +1,29 @@
-"""The guard: flags a posterior that is worse than the prior or badly calibrated on held-out simulations.
+"""The guard: flags a round whose posterior is worse than what it started from, badly calibrated on held-out
+simulations, or given by an unreliable importance-sampling estimate.
 
-Inputs are the held-out check every round computes: the mean log-density gain over the prior at
-the held-out true parameters, mean of log q(theta_i | x_i) - log p(theta_i) (negative: the posterior
-knows less than the prior, and domain randomization with it is worse than with the prior), and
-the expected coverage of credible regions (diagnostics/coverage.py). Each finding is a sentence
-saying what is wrong and what to try.
+Inputs are what every round measures on its held-out simulations (the last
+`diagnostics.held_out_fraction` of the round's own, drawn from the round's proposal):
+- the mean log-density gain of the fitted q over the proposal, mean of log q(theta_i | x_i) - log p~(theta_i)
+  (round 1: over the prior). Not above zero: the round's model knows nothing beyond the distribution its
+  simulations came from, and domain randomization with it is no better than with that distribution;
+- the expected coverage of its HPD regions (diagnostics/coverage.py) against the nominal level L, within
+  min(COVERAGE_TOLERANCE, (1 - L) / 2) (90 % regions: 85-95 %) widened by the estimate's own sampling error
+  (SAMPLING_Z binomial standard errors over the held-out pairs), so a calibrated model checked on few pairs
+  is not flagged by chance;
+- the effective sample size of the posterior given the real data, where it is an importance-sampling
+  estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points.
+Each finding is a sentence saying what is wrong and what to try.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
-# coverage further than this below (overconfident) or above (underconfident) the nominal level L is
-# flagged; never more than half the nominal miscoverage (1 - L) / 2, so 90 % regions must cover 85-95 %
 COVERAGE_TOLERANCE = 0.1
+SAMPLING_Z = 2.33  # one-sided 1 % per band edge
+MIN_EFFECTIVE_SAMPLES = 200
+ACTIONS = ("warn", "fallback", "stop")
 
 
 @dataclasses.dataclass
@@ -28,29 +38,43 @@ class GuardReport:
         return {"ok": self.ok, "warnings": list(self.warnings)}
 
 
-def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None,
+def coverage_band(level: float, count: int, tolerance: float = COVERAGE_TOLERANCE) -> tuple[float, float]:
+    """The held-out coverage of level-L regions that passes, from `count` held-out pairs."""
+    half = min(tolerance, (1 - level) / 2) + SAMPLING_Z * math.sqrt(level * (1 - level) / max(count, 1))
+    return level - half, level + half
+
+
+def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, count: int,
+                    baseline: str = "prior", effective_samples: float | None = None,
                     tolerance: float = COVERAGE_TOLERANCE) -> GuardReport:
-    """mean_gain: held-out mean log q - log p (nats); coverage: {level (str or float): fraction} of
-    HPD regions on held-out simulations. Either may be None (not measured)."""
+    """mean_gain: held-out mean log q - log of `baseline` (the round's proposal; nats); coverage: {level (str
+    or float): fraction} of HPD regions on `count` held-out simulations; effective_samples: of an
+    importance-sampled posterior (None: closed form). Any may be None (not measured)."""
     warnings = []
     if mean_gain is not None and not mean_gain > 0:
         warnings.append(
-            f"the posterior is worse than the prior on held-out simulations (mean log-density gain {mean_gain:+.2f} "
-            "nats): do not randomize with it. Try the probit parameter space if box was set (method.parameter_space=probit; "
-            "api.fit_posterior_model(..., probit=True)), model=mdnn_projected_diagonal, model.covariance=diagonal with fewer components, a summarizer that carries more "
-            "information (corrdiff, waypoints), more simulations, or model=linear as a floor")
+            f"the posterior is worse than the {baseline} on held-out simulations (mean log-density gain "
+            f"{mean_gain:+.2f} nats): do not randomize with it. Try the probit parameter space if box was set "
+            "(method.parameter_space=probit; api.fit_posterior_model(..., probit=True)), model=mdnn_projected_diagonal, "
+            "model.covariance=diagonal with fewer components, a summarizer that carries more information (corrdiff, "
+            "waypoints), more simulations, or model=linear as a floor")
     for level, value in (coverage or {}).items():
-        nominal = float(level)
-        tol = min(tolerance, (1 - nominal) / 2)
-        if value < nominal - tol:
+        low, high = coverage_band(float(level), count, tolerance)
+        if value < low:
             warnings.append(
-                f"overconfident: {value:.0%} of held-out true parameters fall in the {nominal:.0%} credible region: "
-                "the posterior is too narrow. Try an ensemble (model.ensemble=3, mdnn), stronger regularisation "
-                "(weight_decay, smaller hidden layers), model.covariance=diagonal, more simulations, or "
-                "method.parameter_space=probit if box was set")
-        elif value > nominal + tol:
+                f"overconfident: {value:.0%} of held-out true parameters fall in the {float(level):.0%} credible "
+                f"region (passes from {low:.0%}): the posterior is too narrow. Try an ensemble (model.ensemble=3, "
+                "mdnn), stronger regularisation (weight_decay, smaller hidden layers), model.covariance=diagonal, "
+                "more simulations, or method.parameter_space=probit if box was set")
+        elif value > high:
             warnings.append(
-                f"underconfident: {value:.0%} of held-out true parameters fall in the {nominal:.0%} credible region: "
-                "the posterior is wider than the data allow. Try more components, a larger network or more epochs "
-                "(patience)")
+                f"underconfident: {value:.0%} of held-out true parameters fall in the {float(level):.0%} credible "
+                f"region (passes up to {high:.0%}): the posterior is wider than the data allow. Try more "
+                "components, a larger network or more epochs (patience)")
+    if effective_samples is not None and effective_samples < MIN_EFFECTIVE_SAMPLES:
+        warnings.append(
+            f"the posterior given the real data has no closed form and its importance-sampling estimate rests on "
+            f"{effective_samples:.0f} effective draws (< {MIN_EFFECTIVE_SAMPLES}): its density and draws are not "
+            "reliable. Try method.proposal=truncated, fewer mixture components (model.components) or a model of "
+            "one Gaussian per network (mdnn_projected_gaussian_ensemble)")
     return GuardReport(warnings)

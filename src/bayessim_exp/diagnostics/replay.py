@@ -23,5 +23,5 @@ def replay(sims: SimulatorPool, params: torch.Tensor, recorded: Trajectories, wh
     state = sims.task.state_from_observation(recorded.states[which, 0].double().cpu().numpy())
     if state is None:
         raise ValueError(f"task {sims.task.name} cannot map an observation to a simulator state")
-    policy = OpenLoopPolicy(recorded.actions[which].float())
-    return sims.get(len(which)).rollout(params.double(), policy, recorded.horizon, seed=0, state=state)
+    policy = OpenLoopPolicy(recorded.actions[which].float().cpu())
+    return sims.rollout(params.double(), policy, recorded.horizon, seed=0, state=state)

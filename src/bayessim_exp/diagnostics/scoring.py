@@ -1,8 +1,13 @@
-"""A round's distribution against the prior: moments, and the log density of the true parameters.
+"""A round's distribution against the prior: moments, the log density of the true parameters, and where
+the truth lies in the distribution.
 
 log p_post(theta*) - log p_prior(theta*) (the log-density gain) is how much the distribution knows
-about the true parameters beyond the prior. Values that are not finite (a truth outside the
-support) are written as None, so results.json stays strict JSON.
+about the true parameters beyond the prior. `truth` places theta* among the distribution's draws: its
+HPD level (the share of draws with a higher density; theta* lies in the level-L highest-density
+region iff it is below L) and per parameter its marginal rank (the share of draws below it: an SBC
+rank over the number of draws, uniform over truths drawn from the prior when the pipeline is
+calibrated). The calibration study (sweeps/calibration.yaml) reads both. Values that are not finite
+(a truth outside the support) are written as None, so results.json stays strict JSON.
 """
 
 from __future__ import annotations
@@ -19,17 +24,36 @@ def _finite_or_none(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
+TRUTH_DRAWS = 4000  # posterior draws the truth is ranked among (a share's standard error <= 0.008)
+
+
+def truth_rank(posterior: ParameterDistribution, names: list[str], true: np.ndarray, seed: int) -> dict:
+    """{"hpd_level": share of draws denser than theta* (None at zero density), "marginal_rank": {name: share
+    of draws below theta*_d}}. Draws as dense as theta* (a flat distribution: the prior handed on by the
+    guard) count by a uniform share of them, so a flat distribution's level is uniform, as it should be."""
+    t = torch.as_tensor(true, dtype=torch.float64)[None]
+    g = torch.Generator().manual_seed(seed)
+    draws = posterior.sample((TRUTH_DRAWS,), generator=g).double()
+    at_truth = float(posterior.log_prob(t))
+    level = None
+    if math.isfinite(at_truth):
+        lp = posterior.log_prob(draws)
+        ties = float((lp == at_truth).double().mean())
+        level = float((lp > at_truth).double().mean()) + float(torch.rand(1, generator=g, dtype=torch.float64)) * ties
+    return {"hpd_level": level, "marginal_rank": dict(zip(names, (draws < t).double().mean(0).tolist()))}
+
+
 def score(posterior: ParameterDistribution, prior: ParameterDistribution, names: list[str],
-          true: np.ndarray | None) -> dict:
+          true: np.ndarray | None, seed: int = 0) -> dict:
     out = {
         "posterior_mean": dict(zip(names, posterior.mean.double().tolist())),
         "posterior_std": dict(zip(names, posterior.stddev.double().tolist())),
         "prior_std": dict(zip(names, prior.stddev.double().tolist())),
-        "log_prob_true_posterior": None, "log_prob_true_prior": None, "log_prob_gain": None,
+        "log_prob_true_posterior": None, "log_prob_true_prior": None, "log_prob_gain": None, "truth": None,
     }
     if true is not None:
         t = torch.as_tensor(true, dtype=torch.float64)[None]
         lp_post, lp_prior = float(posterior.log_prob(t)), float(prior.log_prob(t))
         out.update(log_prob_true_posterior=_finite_or_none(lp_post), log_prob_true_prior=_finite_or_none(lp_prior),
-                   log_prob_gain=_finite_or_none(lp_post - lp_prior))
+                   log_prob_gain=_finite_or_none(lp_post - lp_prior), truth=truth_rank(posterior, names, true, seed))
     return out

@@ -8,6 +8,7 @@ never switch on the concrete class:
     log_prob(theta)       -> float64 [...], -inf outside the support
     mean, stddev          float64 [D]; Monte Carlo with a fixed seed unless a subclass knows them exactly
     superlevel_box(level) a box around {log_prob >= level}, or None (truncated proposals sample within it)
+    effective_sample_size the draws an importance-sampling estimate rests on; None where exact
     save(path), load(path)
 """
 
@@ -41,6 +42,12 @@ class ParameterDistribution:
     def superlevel_box(self, level: float) -> tuple[torch.Tensor, torch.Tensor] | None:
         """A box (low, high) in parameter units holding every theta with log_prob(theta) >= level; None
         where none is known (here, and for every distribution that does not say otherwise)."""
+        return None
+
+    @property
+    def effective_sample_size(self) -> float | None:
+        """Where the distribution is an importance-sampling estimate, the effective number of draws it
+        rests on (the guard refuses too few); None for distributions known exactly."""
         return None
 
     @functools.cached_property

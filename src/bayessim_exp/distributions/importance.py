@@ -46,6 +46,10 @@ class ImportancePosterior(ParameterDistribution):
     def dim(self) -> int:
         return self._pool.shape[1]
 
+    @property
+    def effective_sample_size(self) -> float:
+        return self.ess
+
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         return self.log_target(theta.double()) - self.log_norm
 

@@ -122,6 +122,10 @@ class ProbitPosterior(ParameterDistribution):
     def dim(self) -> int:
         return self.transform.dim
 
+    @property
+    def effective_sample_size(self) -> float | None:
+        return self.inner.effective_sample_size
+
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         return self.transform.from_probit(self.inner.sample(shape, generator=generator))
 

@@ -9,6 +9,7 @@ The pipeline owns the loop, seeds, artifacts and logging; a method contributes
     posterior(ctx)   the new distribution after the round, from its artifacts (a ParameterDistribution:
                      scored, plotted and handed to domain randomization like any other)
     record(ctx)      method-specific fields of the round's entry in results.json
+    stop_reason(ctx) why the run must stop after this round (its results written), or None
 
 Methods are a config group (`method=bayessim`); a researcher's own is registered with
 `registry.register("method", name, ConfigDataclass)` on a factory `(cfg, comp) -> InferenceMethod`.
@@ -35,6 +36,9 @@ class InferenceMethod(abc.ABC):
 
     def record(self, ctx: RoundContext) -> dict:
         return {}
+
+    def stop_reason(self, ctx: RoundContext) -> str | None:
+        return None
 
 
 def real_trajectories(ctx: RoundContext) -> Trajectories:

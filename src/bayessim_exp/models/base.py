@@ -16,9 +16,11 @@ from .adam_steps import adam_steps
 
 class PosteriorModel(Protocol):
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "",
-            on_epoch: Callable[[int, float, float], None] | None = None, calibrate: bool = True) -> dict:
-        """`calibrate=False`: the caller's pairs come from several proposals, where one spread factor per
-        parameter does not fit (models with cfg.calibrate keep the spread they trained to)."""
+            on_epoch: Callable[[int, float, float], None] | None = None,
+            calibration_rows: torch.Tensor | None = None) -> dict:
+        """`calibration_rows` ([N] bool): the pairs drawn like those the posterior will be used on (the
+        latest round's, when rounds pool simulations from several proposals); models calibrate their
+        spread on the validation pairs among them. None: every pair."""
 
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture: ...
 
@@ -93,9 +95,10 @@ class StandardizedDensityModel:
         raise NotImplementedError
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
-            calibrate: bool = True) -> dict:
+            calibration_rows: torch.Tensor | None = None) -> dict:
         """Trains where `x` lives (a GPU when the pipeline runs with device=cuda); the fitted network
-        goes back to the CPU, where its state is saved and the posteriors are built."""
+        goes back to the CPU, where its state is saved and the posteriors are built. With cfg.calibrate
+        the spread is fitted on the validation pairs among `calibration_rows` (PosteriorModel.fit)."""
         theta, x = theta.float().to(x.device), x.float()
         self.net.to(x.device)
         inputs = None
@@ -115,8 +118,9 @@ class StandardizedDensityModel:
                                     seed=seed, label=label, on_epoch=on_epoch)
             if self.cfg.calibrate:  # fine-tuning starts from the network's own spread, not the last factors
                 self.spread.log_scale.zero_()
-                if calibrate:
-                    val_idx = validation_split(len(theta), self.cfg.val_fraction, seed, label)[0].to(x.device)
+                val_idx = calibration_pairs(validation_split(len(theta), self.cfg.val_fraction, seed, label)[0],
+                                            calibration_rows).to(x.device)
+                if len(val_idx):
                     history["spread_scale"] = self._calibrate(theta_std[val_idx], inputs[val_idx])
         finally:
             self.net.to("cpu")
@@ -139,6 +143,11 @@ def validation_split(n: int, val_fraction: float, seed: int, label: str) -> tupl
         raise TrainingError(f"{label}: {n} simulations are too few to train on")
     perm = torch.randperm(n, generator=g)
     return perm[:n_val], perm[n_val:], g
+
+
+def calibration_pairs(val_idx: torch.Tensor, calibration_rows: torch.Tensor | None) -> torch.Tensor:
+    """The validation indices among `calibration_rows` (all of them when None)."""
+    return val_idx if calibration_rows is None else val_idx[calibration_rows.cpu()[val_idx]]
 
 
 def train_density(

@@ -4,7 +4,8 @@ with the residual covariance as the posterior's. The baseline any model worth sh
 Gaussian noise. The ridge penalty is chosen from `penalties` by the held-out split's mean squared
 residual (standardised parameters); the covariance is
 that of the held-out residuals (in-sample residuals are too small when summaries have hundreds of
-features), and the weights are then refitted on all the data.
+features), of the held-out pairs among `calibration_rows` when the caller names them (the latest
+round's), and the weights are then refitted on all the data.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ class LinearGaussian:
         return -float(torch.distributions.MultivariateNormal(torch.zeros_like(residual[0]), cov).log_prob(residual).mean())
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
-            calibrate: bool = True) -> dict:  # calibrated by construction: the covariance of held-out residuals
+            calibration_rows: torch.Tensor | None = None) -> dict:
         theta, x = theta.double(), x.double()
         n = len(theta)
         n_val = max(1, int(round(self.cfg.val_fraction * n)))
@@ -56,12 +57,15 @@ class LinearGaussian:
         z = (x - self.shift) / self.scale
         val = torch.zeros(n, dtype=torch.bool)
         val[torch.randperm(n, generator=torch.Generator().manual_seed(seed))[:n_val]] = True
+        # the covariance from the held-out pairs drawn like the ones conditioned on, where enough of them are
+        spread = val if calibration_rows is None else val & calibration_rows.cpu()
+        spread = spread[val] if int(spread.sum()) > self.theta_dim else torch.ones(n_val, dtype=torch.bool)
         system = RidgeSystem(z, theta)
         theta_scale = theta.std(0).clamp_min(1e-12)
         scores, covs = [], []
         for penalty in self.cfg.penalties:
             resid_val = theta[val] - system.predict(val, system.solve(penalty, val))
-            covs.append(torch.cov(resid_val.T).reshape(self.theta_dim, self.theta_dim))
+            covs.append(torch.cov(resid_val[spread].T).reshape(self.theta_dim, self.theta_dim))
             scores.append(float((resid_val / theta_scale).pow(2).mean()))
         best = min(range(len(scores)), key=scores.__getitem__)
         self.weights = system.solve(self.cfg.penalties[best])

@@ -33,21 +33,30 @@ class SimulatorPool:
     def rollout(self, params: torch.Tensor | np.ndarray, policy: Policy, horizon: int, seed: int,
                 progress: bool = False, state: dict[str, np.ndarray] | None = None) -> Trajectories:
         """Trajectories for every row of params [N, D], simulated `chunk` slots at a time; chunk k resets
-        with a seed derived from (seed, k). `state` (initial states [N, ...]) replaces the reset draw."""
+        with a seed derived from (seed, k). `state` (initial states [N, ...]) replaces the reset draw. A
+        policy with a `plan` (policies.ReplayPolicy) gives each row's actions and initial state; a policy
+        with `select` (policies.OpenLoopPolicy) acts row by row and is cut into chunks with the rows."""
         params = np.asarray(params, dtype=np.float64)
+        if hasattr(policy, "plan"):
+            policy, planned = policy.plan(len(params))
+            state = planned if state is None else state
         seeds = np.random.SeedSequence(seed).generate_state(max(1, -(-len(params) // self.chunk)))
         parts = []
         for k, start in enumerate(range(0, len(params), self.chunk)):
-            block = params[start : start + self.chunk]
-            part_state = None if state is None else {f: v[start : start + self.chunk] for f, v in state.items()}
+            rows = slice(start, start + self.chunk)
+            block = params[rows]
+            part_state = None if state is None else {f: v[rows] for f, v in state.items()}
+            part_policy = policy.select(rows) if hasattr(policy, "select") else policy
             n, full = len(block), self._sims.get(self.chunk)
             if n < self.chunk and full is not None and full.compiles_per_size:
                 pad = self.chunk - n
                 part_state = None if part_state is None else {f: _fill(np.asarray(v), pad) for f, v in part_state.items()}
-                traj = full.rollout(_fill(block, pad), policy, horizon, int(seeds[k]), progress, part_state)
+                if hasattr(part_policy, "select"):
+                    part_policy = part_policy.select(torch.as_tensor(_fill(np.arange(n), pad)))
+                traj = full.rollout(_fill(block, pad), part_policy, horizon, int(seeds[k]), progress, part_state)
                 parts.append(traj.select(slice(0, n)))
             else:
-                parts.append(self.get(n).rollout(block, policy, horizon, int(seeds[k]), progress, part_state))
+                parts.append(self.get(n).rollout(block, part_policy, horizon, int(seeds[k]), progress, part_state))
         return Trajectories.cat(parts)
 
 

@@ -20,11 +20,11 @@ from .correction import needs_no_correction
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
-              seed: int = 0, probit: ProbitTransform | None = None,
-              combination: str = "dispersion") -> tuple[ParameterDistribution, Dispersion | None]:
+              seed: int = 0, probit: ProbitTransform | None = None, combination: str = "dispersion",
+              temperature: float = 1.0) -> tuple[ParameterDistribution, Dispersion | None]:
     """The posterior given x_obs [n, F] (or one summary [F]), and the dispersion of the per-trajectory
     posteriors (None for one summary); `combination` says how several summaries are combined
-    (combination.py).
+    (combination.py), `temperature` widens it further (combine).
 
     prior None means an improper flat prior (no truncation); proposal None means simulations from the prior.
     probit: the transform the model's parameters were fitted in, or None for parameter units.
@@ -32,9 +32,11 @@ def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components:
     x_obs = x_obs.reshape(-1, x_obs.shape[-1])
     conditionals = [model.conditional(x) for x in x_obs]
     if probit is None:
-        return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed)
+        return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed,
+                       temperature=temperature)
     post, spread = combine(combination, conditionals, standard_normal_prior(probit.dim),
-                           _probit_proposal(proposal, prior), max_components=max_components, seed=seed)
+                           _probit_proposal(proposal, prior), max_components=max_components, seed=seed,
+                           temperature=temperature)
     return ProbitPosterior(post, probit), spread
 
 

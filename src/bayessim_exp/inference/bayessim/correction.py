@@ -157,9 +157,16 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
 
     reason = _closed_form_obstacle(conditionals, prior, prior_power, corrected)
     if reason is None:
-        mix = _temper(_product(conditionals, max_components), tau)
-        lam, eta = _ratio_natural(prior, prior_power, corrected, mix.dim, tau)
-        result = mix if lam is None else _apply_gaussian_ratio(mix, lam, eta)
+        lam, eta = _ratio_natural(prior, prior_power, corrected, conditionals[0].dim, tau)
+        result = _closed_form(conditionals, max_components, tau, lam, eta)
+        prior_factor = _gaussian_factor(prior)
+        if result is None and isinstance(prior_factor, tuple):
+            # a component wider than a Gaussian prior is a fitting artefact (no posterior of a Gaussian
+            # prior is); dividing by the prior then leaves a negative precision: narrow it to the prior's
+            narrowed = [_no_wider_than(q, prior_factor[1]) for q in conditionals]
+            result = _closed_form(narrowed, max_components, tau, lam, eta)
+            if result is not None:
+                log.info("posterior: components wider than the prior narrowed to it, keeping the closed form")
         if result is not None:
             return result if box is None else TruncatedMixture(result, *box, seed=seed)
         reason = "a component's corrected precision is not positive definite"
@@ -174,6 +181,28 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample size %.0f",
                 reason, _IS_DRAWS, result.ess)
     return result
+
+
+def _closed_form(conditionals: Sequence[GaussianMixture], max_components: int, tau: float, lam, eta):
+    """The tempered product of the conditionals times exp(-theta^T lam theta / 2 + eta^T theta); None
+    where a corrected precision is not positive definite."""
+    mix = _temper(_product(conditionals, max_components), tau)
+    return mix if lam is None else _apply_gaussian_ratio(mix, lam, eta)
+
+
+def loewner_min(covs: torch.Tensor, cov0: torch.Tensor) -> torch.Tensor:
+    """Covariances [..., D, D] with their eigenvalues relative to cov0 (those of L0^-1 S L0^-T, cov0 =
+    L0 L0^T) clamped at 1: no wider than cov0 in any direction, unchanged where they are narrower."""
+    chol0 = torch.linalg.cholesky(cov0.double())
+    white = torch.linalg.solve_triangular(chol0, torch.linalg.solve_triangular(chol0, covs.double(), upper=False)
+                                          .transpose(-1, -2), upper=False)
+    values, vectors = torch.linalg.eigh(0.5 * (white + white.transpose(-1, -2)))
+    clamped = vectors @ torch.diag_embed(values.clamp(max=1.0)) @ vectors.transpose(-1, -2)
+    return chol0 @ clamped @ chol0.T
+
+
+def _no_wider_than(mix: GaussianMixture, cov0: torch.Tensor) -> GaussianMixture:
+    return GaussianMixture(mix.log_weights, mix.means, loewner_min(mix.covs, cov0))
 
 
 class CorrectedProduct:

@@ -2,8 +2,11 @@
 q(theta | x), condition on every real summary with the proposal's correction.
 
 Stages of a round: collect (parameters from the proposal, trajectories under the collect policy)
--> summarize -> fit (the posterior model; held-out simulations give its expected coverage) ->
-condition (the posterior given all real trajectories, docs/statistics.md).
+-> summarize -> fit (the posterior model, its spread calibrated and its coverage and gain measured on
+the round's own held-out simulations) -> condition (the posterior given all real trajectories,
+docs/statistics.md, widened until the real trajectories lie among its replays where the task can
+replay them) -> model_check (predictive checks, the mismatch verdict) -> guard (what the round hands
+on: its posterior, or on a failed check the last one that passed, method.on_guard).
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import logging
 import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
-from ...diagnostics.guard import check_posterior
+from ...diagnostics.guard import ACTIONS, check_posterior
 from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
@@ -30,6 +33,7 @@ from ..base import InferenceMethod, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition
 from .proposals import moment_matched
+from .replay_tempering import temper_to_replays
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +57,8 @@ class BayesSimConfig:
     max_components: int  # mixture components kept when combining several real trajectories
     parameter_space: str  # auto | probit | box: what the model is fitted in (distributions/probit.py)
     combination: str  # several real trajectories: dispersion | product (combination.py)
+    replay_tempering: bool  # widen the posterior until the real trajectories lie among its replays
+    on_guard: str  # a round the guard flags: warn | fallback | stop (diagnostics/guard.py)
 
     def validate(self) -> None:
         if self.parameter_space not in PARAMETER_SPACES:
@@ -61,6 +67,8 @@ class BayesSimConfig:
             raise ConfigError(f"proposal={self.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
         if self.combination not in COMBINATIONS:
             raise ConfigError(f"combination={self.combination!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
+        if self.on_guard not in ACTIONS:
+            raise ConfigError(f"on_guard={self.on_guard!r} not allowed; allowed: {', '.join(ACTIONS)}")
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
 
@@ -78,6 +86,7 @@ class BayesSim(InferenceMethod):
             Stage("fit", self.fit, inputs=("summarize",)),
             Stage("condition", self.condition, inputs=("real", "fit")),
             Stage("model_check", self.model_check, inputs=("real", "summarize", "condition")),
+            Stage("guard", self.guard, inputs=("fit", "condition")),
         ]
 
     # proposals -----------------------------------------------------------------------
@@ -86,15 +95,18 @@ class BayesSim(InferenceMethod):
         return self.comp.prior if self.proposal_name(ctx) == "prior" else self._proposals[ctx.round]
 
     def proposal_name(self, ctx: RoundContext) -> str:
-        """The proposal round r really uses: `truncated` falls back to the prior when the previous
-        posterior's region is too small a share of it to sample (many parameters)."""
+        """The proposal round r really uses: `truncated` falls back to the prior when the previous round's
+        distribution is the prior (the guard's fallback) or its region is too small a share of it to
+        sample (many parameters)."""
         r = ctx.round
         if r == 1 or self.cfg.proposal == "prior":
             return "prior"
         if r not in self._proposals:
-            previous = ctx.output("condition", r - 1)["posterior"]
+            previous = self._handed_on(ctx, r - 1)
             seed = stage_seed(ctx.run_seed, r, "proposal")  # fixed per round, whichever stage asks first
-            if self.cfg.proposal == "truncated":
+            if previous is self.comp.prior:
+                self._proposals[r] = None
+            elif self.cfg.proposal == "truncated":
                 try:
                     self._proposals[r] = TruncatedPrior(self.comp.prior, previous, seed=seed)
                 except ValueError as exc:
@@ -135,21 +147,26 @@ class BayesSim(InferenceMethod):
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
         # trained on the run's device (summaries are stored on the CPU; with device=cuda they are copied there)
         dev = self.comp.device
-        # one spread factor per parameter cannot fit pairs pooled from several proposals: it widened
-        # Pendulum's round-3 posterior (docs/statistics.md), so only single-proposal fits calibrate
-        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibrate=len(data) == 1)
+        # the spread is calibrated on the latest round's pairs, drawn like the pairs the posterior is used on:
+        # one factor per parameter fitted to rounds pooled from several proposals would fit the wide early ones
+        latest = torch.zeros(len(theta), dtype=torch.bool)
+        latest[len(theta) - len(data[-1][0]):] = True
+        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest)
         ctx.tb.losses(r, history)
-        theta_val, x_val = self._fitted_space(data[-1][2]), data[-1][3]
+        theta_val, x_val = data[-1][2], data[-1][3]
         d = self.comp.rc.diagnostics
-        coverage = None if len(theta_val) == 0 else expected_coverage(
-            model, theta_val, x_val, d.levels, d.coverage_samples, seed=ctx.seed)
-        # the gain over the prior is measured where the held-out parameters come from the prior: round 1
-        gain = None if len(theta_val) == 0 or r > 1 else held_out_gain(model, theta_val, x_val, self._fitted_prior())
-        guard = check_posterior(gain, coverage and coverage["hpd"])
-        for warning in guard.warnings:
-            log.warning("round %d: %s", r, warning)
+        if len(theta_val) == 0:
+            return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": None,
+                    "held_out": None}
+        coverage = expected_coverage(model, self._fitted_space(theta_val), x_val, d.levels, d.coverage_samples,
+                                     seed=ctx.seed)
+        over_prior = held_out_gain(model, self._fitted_space(theta_val), x_val, self._fitted_prior())
+        # log q - log p~ = (log q - log p) - (log p~ - log p), the same in parameter units and in probit space
+        proposal_ratio = (self.proposal(ctx).log_prob(theta_val.double()) - self.comp.prior.log_prob(theta_val.double()))
+        held_out = {"count": len(theta_val), "gain": over_prior,
+                    "gain_over_proposal": over_prior - float(proposal_ratio.mean())}
         return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
-                "held_out_gain": gain, "guard": guard.to_dict()}
+                "held_out": held_out}
 
     def _fitted_space(self, theta: torch.Tensor) -> torch.Tensor:
         return theta if self.probit is None else self.probit.to_probit(theta).float()
@@ -166,35 +183,60 @@ class BayesSim(InferenceMethod):
     def condition(self, ctx: RoundContext) -> dict:
         model = self.comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
-        x_real = self.comp.summarizer(real_trajectories(ctx).to(self.comp.device)).cpu()
-        try:
-            post, spread = condition(model, x_real, self.comp.prior, self.cfg.max_components,
-                                     proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
-                                     combination=self.cfg.combination)
-        except ValueError as exc:
-            raise PosteriorError(f"round {ctx.round}: {exc}") from exc
-        return {"posterior": post, "x_real": x_real, "dispersion": None if spread is None else spread.record()}
+        real = real_trajectories(ctx)
+        x_real = self._summaries(real)
+        spreads = []
+
+        def condition_at(temperature: float):
+            try:
+                post, spread = condition(model, x_real, self.comp.prior, self.cfg.max_components,
+                                         proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
+                                         combination=self.cfg.combination, temperature=temperature)
+            except ValueError as exc:
+                raise PosteriorError(f"round {ctx.round}: {exc}") from exc
+            spreads.append(spread)
+            return post
+
+        d = self.comp.rc.diagnostics
+        replayable = d.replay_sims > 0 and self.comp.task.state_from_observation(
+            real.states[:1, 0].double().cpu().numpy()) is not None
+        if d.replay_sims and not replayable:
+            log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
+                     ctx.round, self.comp.task.name)
+        out = {"x_real": x_real, "temperature": 1.0, "replay_check": None, "unwidened_replay_check": None,
+               "tempering": None}
+        if not replayable:
+            out["posterior"] = condition_at(1.0)
+        else:
+            def check(posterior):
+                return replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real, posterior,
+                                      self.comp.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
+                                      alpha=d.mismatch_alpha, max_distance_ratio=d.mismatch_distance_ratio)
+
+            if self.cfg.replay_tempering:
+                out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
+                    condition_at, check, torch.diag(self.comp.prior.stddev.double() ** 2))
+            else:
+                out["posterior"] = condition_at(1.0)
+                first = result = check(out["posterior"])
+            out["replay_check"], out["unwidened_replay_check"] = result.record(), first.record()
+            ctx.tb.replays(ctx.round, result, list(self.comp.task.obs_names))
+        out["dispersion"] = None if spreads[-1] is None else spreads[-1].record()
+        return out
+
+    def _summaries(self, traj: Trajectories) -> torch.Tensor:
+        return self.comp.summarizer(traj.to(self.comp.device)).cpu()
 
     def model_check(self, ctx: RoundContext) -> dict:
         """Can the simulator, at parameters the posterior allows, reproduce the real data? The summary
-        predictive check, the replayed check (each real trajectory's own start and actions, where the
-        task can restart from an observation) and the mismatch verdict (diagnostics/mismatch.py)."""
+        predictive check and the mismatch verdict (diagnostics/mismatch.py) from the real summaries'
+        place among the simulated ones, the replayed check (condition) and the dispersion."""
         d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
-        posterior, x_real, real = conditioned["posterior"], conditioned["x_real"], real_trajectories(ctx)
-        check = None
-        if d.replay_sims and self.comp.task.state_from_observation(real.states[:1, 0].double().cpu().numpy()) is not None:
-            check = replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real,
-                                   posterior, self.comp.prior, num=d.replay_sims, seed=ctx.seed, alpha=d.mismatch_alpha,
-                                   max_distance_ratio=d.mismatch_distance_ratio)
-            ctx.tb.replays(ctx.round, check, list(self.comp.task.obs_names))
-        elif d.replay_sims:
-            log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
-                     ctx.round, self.comp.task.name)
-        outside = summaries_outside(x_real, ctx.output("summarize")["x"])
-        replay_record = None if check is None else check.record()
-        return {"predictive_distance": self._predictive(ctx, posterior, x_real), "replay_check": replay_record,
-                "mismatch": mismatch_report(ctx.round, outside, replay_record, conditioned["dispersion"],
-                                            d.mismatch_alpha)}
+        _, x_train, _, x_held = self._split(ctx.output("summarize"))
+        outside = summaries_outside(conditioned["x_real"], x_train, x_held)
+        return {"predictive_distance": self._predictive(ctx, conditioned["posterior"], conditioned["x_real"]),
+                "mismatch": mismatch_report(ctx.round, outside, conditioned["unwidened_replay_check"],
+                                            conditioned["dispersion"], d.mismatch_alpha)}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
         num = self.comp.rc.diagnostics.predictive_sims
@@ -209,12 +251,44 @@ class BayesSim(InferenceMethod):
 
         return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, ctx.seed)
 
+    def guard(self, ctx: RoundContext) -> dict:
+        """The guard's findings (diagnostics/guard.py) and what the round hands on to domain randomization
+        and the next proposal: its own posterior, or with on_guard=fallback and a finding the distribution
+        the previous round handed on (the prior before round 1)."""
+        r, held_out = ctx.round, ctx.output("fit")["held_out"] or {}
+        baseline = "prior" if self.proposal_name(ctx) == "prior" else f"round's proposal ({self.proposal_name(ctx)})"
+        report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
+                                 held_out.get("count", 0), baseline,
+                                 ctx.output("condition")["posterior"].effective_sample_size)
+        action = "none" if report.ok else self.cfg.on_guard
+        handed_on = self._handed_on_round(ctx, r - 1) if action == "fallback" else r
+        for warning in report.warnings:
+            log.warning("round %d: %s", r, warning)
+        if action == "fallback":
+            log.warning("round %d: the guard failed; domain randomization and the next proposal get %s instead "
+                        "(method.on_guard=fallback)", r, _round_name(handed_on))
+        return {**report.to_dict(), "action": action, "handed_on": handed_on}
+
+    def _handed_on_round(self, ctx: RoundContext, r: int) -> int:
+        """The round whose posterior round r handed on; 0: the prior."""
+        return 0 if r == 0 else ctx.output("guard", r)["handed_on"]
+
+    def _handed_on(self, ctx: RoundContext, r: int) -> ParameterDistribution:
+        source = self._handed_on_round(ctx, r)
+        return self.comp.prior if source == 0 else ctx.output("condition", source)["posterior"]
+
     # results -------------------------------------------------------------------------
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
-        return ctx.output("condition")["posterior"]
+        return self._handed_on(ctx, ctx.round)
+
+    def stop_reason(self, ctx: RoundContext) -> str | None:
+        guard = ctx.output("guard")
+        if guard["action"] != "stop":
+            return None
+        return f"round {ctx.round}: the guard failed (method.on_guard=stop): " + "; ".join(guard["warnings"])
 
     def record(self, ctx: RoundContext) -> dict:
-        summary, fitted = ctx.output("summarize"), ctx.output("fit")
+        summary, fitted, conditioned, guard = (ctx.output(s) for s in ("summarize", "fit", "condition", "guard"))
         hist = fitted["history"]
         return {
             "sim_trajectories": self.comp.rc.collect.trajectories,
@@ -225,11 +299,17 @@ class BayesSim(InferenceMethod):
             "val_loss": hist["best_val"],
             "proposal": self.proposal_name(ctx),
             "coverage": fitted["coverage"],
-            "held_out_gain": fitted["held_out_gain"],
-            "guard": fitted["guard"],
-            "dispersion": ctx.output("condition")["dispersion"],
+            "held_out": fitted["held_out"],
+            "guard": {**{k: guard[k] for k in ("ok", "warnings", "action")}, "handed_on": _round_name(guard["handed_on"])},
+            "dispersion": conditioned["dispersion"],
+            "temperature": conditioned["temperature"],
+            "replay_check": conditioned["replay_check"],
             **{k: v for k, v in ctx.output("model_check").items() if k != "seconds"},
         }
+
+
+def _round_name(r: int) -> str:
+    return "the prior" if r == 0 else f"round {r}'s posterior"
 
 
 def _probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransform | None:

@@ -38,6 +38,13 @@ def test_every_option_builds(compose, tmp_path, real_file, group, name, budget):
     Pipeline(compose([f"{group}={name}", *extra, *budget]), tmp_path)
 
 
+@pytest.mark.parametrize("name", [name for group, name in OPTIONS if group == "model"])
+def test_smoke_shrinks_the_epochs_of_every_model_trained_in_epochs(compose, name):
+    full, smoke = compose([f"model={name}"]).model, compose([f"model={name}", "debug=smoke"]).model
+    if "max_epochs" in full:  # conf/model_debug/<name>_smoke.yaml
+        assert smoke.max_epochs < full.max_epochs and smoke.patience < full.patience
+
+
 @pytest.mark.parametrize("group, name", OPTIONS)
 def test_defaults_are_written_once_in_the_yaml(compose, group, name):
     text = (CONF / group / f"{name}.yaml").read_text()

@@ -71,9 +71,11 @@ def slurm_executor(preset, folder, monkeypatch):
     params = OmegaConf.to_container(preset, resolve=False)
     params.pop("_target_"), params.pop("submitit_folder")
     params["name"] = "job"  # ${hydra.job.name} resolves only inside a run
-    executor = submitit.AutoExecutor(folder=folder, cluster="slurm", slurm_max_num_timeout=params.pop("max_num_timeout"))
+    executor = submitit.AutoExecutor(folder=folder, cluster="slurm",
+                                     slurm_max_num_timeout=params.pop("max_num_timeout"))
     base = set(OmegaConf.structured(BaseQueueConf).keys())
-    executor.update_parameters(**{k if k in base else f"slurm_{k}": v for k, v in params.items()})  # raises on unknown keys
+    # raises on unknown keys
+    executor.update_parameters(**{k if k in base else f"slurm_{k}": v for k, v in params.items()})
     return executor
 
 

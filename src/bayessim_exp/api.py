@@ -42,10 +42,11 @@ class FittedPosterior:
 
     def posterior(self, x_obs: torch.Tensor, proposal=None, combination: str = "dispersion"):
         """The posterior given one summary [F] or several i.i.d. ones [n, F]; `proposal`: what the
-        training parameters were drawn from, if not the prior (SNPE-A correction); `combination`: how
-        several summaries are combined (inference/bayessim/combination.py)."""
-        return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components, proposal=proposal,
-                         probit=self.probit, combination=combination)[0]
+        training parameters were drawn from, if not the prior (SNPE-A correction; what a prior may be);
+        `combination`: how several summaries are combined (inference/bayessim/combination.py)."""
+        return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components,
+                         proposal=_parameter_distribution(proposal, "proposal"), probit=self.probit,
+                         combination=combination)[0]
 
     def save(self, path: str | Path) -> None:
         torch.save({"name": self.name, "config": self.config, "state": self.model.state_dict(),
@@ -62,15 +63,37 @@ class FittedPosterior:
         return cls(d["name"], model, d["prior"], d["config"], d["history"], probit=probit)
 
 
+def _parameter_distribution(dist, what: str = "prior") -> ParameterDistribution | None:
+    """The project's distribution for a prior (or proposal) given to the API: ours as they are, None (a flat
+    improper prior) as it is, and torch's independent uniforms and Gaussians over a vector of parameters
+    converted (sbi's BoxUniform is an Independent(Uniform)). Anything else is refused here, at the call, rather
+    than deep inside conditioning."""
+    if dist is None or isinstance(dist, ParameterDistribution):
+        return dist
+    tdist = torch.distributions
+    base = dist.base_dist if isinstance(dist, tdist.Independent) and dist.reinterpreted_batch_ndims == 1 else dist
+    if isinstance(base, tdist.Uniform) and len(base.batch_shape) == 1:
+        return BoxUniform(base.low, base.high)
+    if isinstance(base, tdist.Normal) and len(base.batch_shape) == 1:
+        return GaussianPrior(base.loc, base.scale)  # untruncated
+    raise TypeError(f"{what}={dist!r} is not supported: give api.BoxUniform, api.GaussianPrior or api.LogUniform, "
+                    "or torch's Independent(Uniform(low, high), 1) / Independent(Normal(loc, scale), 1) (or a "
+                    "Uniform / Normal) over a vector [D] of parameters")
+
+
 def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=None, seed: int = 0,
                         probit: bool = False, **cfg: Any) -> FittedPosterior:
     """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg overrides the defaults in
-    conf/model/<name>.yaml.
+    conf/model/<name>.yaml. `prior`: api.BoxUniform, api.GaussianPrior, api.LogUniform, None (flat), or torch's
+    Independent(Uniform) / Independent(Normal) over [D] parameters (sbi's BoxUniform), converted to ours.
 
     probit=True fits the model to the parameters mapped onto R^D by the prior's marginal CDFs
     (distributions/probit.py; needs an independent prior on a box); posteriors come back in parameter units.
     """
+    prior = _parameter_distribution(prior)
     theta, x = torch.as_tensor(theta), torch.as_tensor(x)
+    if prior is not None and prior.dim != theta.shape[1]:
+        raise ValueError(f"the prior is over {prior.dim} parameters, theta has {theta.shape[1]} columns")
     transform = ProbitTransform(prior) if probit else None
     model = registry.build("model", {**cfg, "name": name}, theta_dim=theta.shape[1], x_dim=x.shape[1])
     target = theta if transform is None else transform.to_probit(theta)

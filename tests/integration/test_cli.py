@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -29,6 +30,17 @@ def test_bad_config_fails_fast_with_the_allowed_values(tmp_path, args, expected)
     for text in expected:
         assert text in proc.stderr, proc.stderr
     assert not list(tmp_path.glob("run/round_*"))  # refused before anything was simulated
+
+
+def test_help_says_what_the_program_does_and_lists_the_config_groups(tmp_path):
+    proc = cli("--help", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    for text in ("BayesSim on MuJoCo", "python -m bayessim_exp debug=smoke", "make sweep SWEEP=models",
+                 "python -m bayessim_exp.report", "README.md", "docs/"):
+        assert text in proc.stdout, proc.stdout
+    assert re.search(r"^model: .*\blinear\b.*\bmdnn\b", proc.stdout, re.M)  # Hydra's $APP_CONFIG_GROUPS
+    assert re.search(r"^task: .*\bPendulum\b", proc.stdout, re.M)
+    assert not list(tmp_path.iterdir())  # nothing ran
 
 
 def test_multirun_goes_on_past_a_failing_job_and_names_it(tmp_path):

@@ -25,15 +25,24 @@ def real_file(tmp_path):
     return path
 
 
-@pytest.mark.parametrize("group, name", OPTIONS)
-def test_every_option_builds(compose, tmp_path, real_file, group, name):
+EXPERIMENTS = [("experiment", p.stem) for p in sorted((CONF / "experiment").glob("*.yaml"))]
+
+
+@pytest.mark.parametrize("budget", [[], ["debug=smoke"]], ids=["default", "smoke"])
+@pytest.mark.parametrize("group, name", OPTIONS + EXPERIMENTS)
+def test_every_option_builds(compose, tmp_path, real_file, group, name, budget):
+    """What the pipeline checks and builds before simulating (Pipeline.__init__: the run's keys, every component
+    with its parameters), for each option varied alone from the defaults, and under debug=smoke: a debug budget
+    may not name a key that an option lacks (model=linear has no epochs: conf/model_debug)."""
     extra = [f"real.path={real_file}"] if (group, name) == ("real", "file") else []
-    Pipeline(compose([f"{group}={name}", *extra]), tmp_path)
+    Pipeline(compose([f"{group}={name}", *extra, *budget]), tmp_path)
 
 
-@pytest.mark.parametrize("name", sorted(p.stem for p in (CONF / "experiment").glob("*.yaml")))
-def test_every_experiment_builds(compose, tmp_path, name):
-    Pipeline(compose([f"experiment={name}"]), tmp_path)
+@pytest.mark.parametrize("name", [name for group, name in OPTIONS if group == "model"])
+def test_smoke_shrinks_the_epochs_of_every_model_trained_in_epochs(compose, name):
+    full, smoke = compose([f"model={name}"]).model, compose([f"model={name}", "debug=smoke"]).model
+    if "max_epochs" in full:  # conf/model_debug/<name>_smoke.yaml
+        assert smoke.max_epochs < full.max_epochs and smoke.patience < full.patience
 
 
 @pytest.mark.parametrize("group, name", OPTIONS)

@@ -1,5 +1,6 @@
 """Every stored sweep and launcher preset composes, names only options that exist, and says how to run it."""
 
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -56,26 +57,49 @@ def launcher(overrides):
         return compose(config_name="config", overrides=overrides, return_hydra_config=True).hydra.launcher
 
 
-def test_slurm_presets_take_overrides_and_submitit_accepts_every_key(tmp_path):
+def slurm_executor(preset, folder, monkeypatch):
+    """The submitit executor hydra-submitit-launcher builds from a preset (submitit_launcher.py: keys outside
+    BaseQueueConf get the slurm_ prefix). Building it needs no cluster except that submitit's constructor looks
+    for `srun` on PATH (submitit/slurm/slurm.py, SlurmExecutor.affinity): that lookup alone is faked; every key is
+    still checked, and the sbatch script rendered, by submitit itself."""
     import submitit
     from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
     from omegaconf import OmegaConf
+    from submitit.slurm.slurm import SlurmExecutor
 
+    monkeypatch.setattr(SlurmExecutor, "affinity", classmethod(lambda cls: 2))
+    params = OmegaConf.to_container(preset, resolve=False)
+    params.pop("_target_"), params.pop("submitit_folder")
+    params["name"] = "job"  # ${hydra.job.name} resolves only inside a run
+    executor = submitit.AutoExecutor(folder=folder, cluster="slurm",
+                                     slurm_max_num_timeout=params.pop("max_num_timeout"))
+    base = set(OmegaConf.structured(BaseQueueConf).keys())
+    # raises on unknown keys
+    executor.update_parameters(**{k if k in base else f"slurm_{k}": v for k, v in params.items()})
+    return executor
+
+
+def test_slurm_presets_take_overrides_and_submitit_accepts_every_key(tmp_path, monkeypatch):
     gpu = launcher(["hydra/launcher=slurm_gpu", "hydra.launcher.partition=a100", "hydra.launcher.timeout_min=30",
-                    "hydra.launcher.srun_args=['--cpu-bind=none']"])
+                    "hydra.launcher.srun_args=['--cpu-bind=none']", "hydra.launcher.setup=['module load cuda']"])
     assert (gpu.partition, gpu.timeout_min, gpu.gpus_per_node, gpu.cpus_per_task, gpu.mem_gb) == ("a100", 30, 1, 8, 32)
     assert list(gpu.srun_args) == ["--cpu-bind=none"]
     assert gpu.max_num_timeout > 0  # timed-out jobs are requeued: stages resume from the run dir
     cpu = launcher(["hydra/launcher=slurm_cpu"])
     assert cpu.gpus_per_node is None
-    # what the launcher hands submitit (submitit_launcher.py: keys outside BaseQueueConf get the slurm_ prefix)
-    params = OmegaConf.to_container(cpu, resolve=False)
-    params.pop("_target_"), params.pop("submitit_folder")
-    executor = submitit.AutoExecutor(folder=tmp_path, cluster="slurm", slurm_max_num_timeout=params.pop("max_num_timeout"))
-    base = set(OmegaConf.structured(BaseQueueConf).keys())
-    params["name"] = "job"  # ${hydra.job.name} resolves only inside a run
-    executor.update_parameters(**{k if k in base else f"slurm_{k}": v for k, v in params.items()})  # raises on unknown keys
-    with pytest.raises(Exception, match="partiton"):
+    slurm_executor(cpu, tmp_path / "cpu", monkeypatch)
+    executor = slurm_executor(gpu, tmp_path / "gpu", monkeypatch)
+    # the sbatch script as it would be submitted (what sbatch itself does with it needs a cluster: test_slurm.py)
+    script = executor._executor._make_submission_file_text("python -u -m submitit.core._submit folder", "uid")
+    for line in ("#SBATCH --partition=a100", "#SBATCH --time=30", "#SBATCH --gpus-per-node=1",
+                 "#SBATCH --cpus-per-task=8", "#SBATCH --mem=32GB", "#SBATCH --signal=USR2@120", "module load cuda"):
+        assert line in script.splitlines(), line
+    assert "srun --unbuffered" in script and "--cpu-bind=none python -u -m submitit.core._submit" in script
+    (tmp_path / "job.sh").write_text(script)
+    assert subprocess.run(["bash", "-n", str(tmp_path / "job.sh")]).returncode == 0  # valid shell
+    with pytest.raises(NameError, match="partiton"):  # submitit refuses a key it does not know
+        executor.update_parameters(slurm_partiton="x")
+    with pytest.raises(Exception, match="partiton"):  # and Hydra refuses it first
         launcher(["hydra/launcher=slurm_cpu", "hydra.launcher.partiton=x"])
 
 

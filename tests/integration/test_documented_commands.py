@@ -1,0 +1,134 @@
+"""Every benchmark and script answers `--help`, and takes the commands its module docstring documents: each
+documented argument list is parsed by the script's own parser (not run: benchmarks take minutes to hours).
+benchmarks/rl.py's sizes are checked for its GPU command and its CPU path is run at a tiny size."""
+
+import ast
+import importlib.util
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[2]
+SCRIPTS = sorted([*(REPO / "benchmarks").glob("*.py"), *(REPO / "scripts").glob("*.py")])
+ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
+
+# In a subprocess per script, as `python <script>` runs it: `--help` must exit 0; then main() runs once per
+# documented argument list with ArgumentParser.parse_args stopping it right after a successful parse.
+DRIVER = r"""
+import argparse, json, runpy, sys
+from pathlib import Path
+
+script, commands = sys.argv[1], json.loads(sys.argv[2])
+sys.path.insert(0, str(Path(script).parent))
+sys.argv = [script, "--help"]
+try:
+    runpy.run_path(script, run_name="__main__")
+except SystemExit as exc:
+    if exc.code not in (0, None):
+        sys.exit(f"--help exited {exc.code}")
+else:
+    sys.exit("--help did not exit: the script has no argparse --help")
+
+
+class Parsed(Exception):
+    pass
+
+
+parse = argparse.ArgumentParser.parse_args
+
+
+def parse_only(self, args=None, namespace=None):
+    parse(self, args, namespace)  # argparse exits 2, naming the argument, on one it does not take
+    raise Parsed
+
+
+argparse.ArgumentParser.parse_args = parse_only
+for args in commands:
+    sys.argv = [script, *args]
+    try:
+        runpy.run_path(script, run_name="__main__")
+    except Parsed:
+        continue
+    sys.exit(f"{' '.join(args)}: main() ended without parsing its arguments")
+"""
+
+
+def documented_commands(path: Path) -> list[list[str]]:
+    """The argument lists of the docstring's commands that run `path`: a line naming it, continued by a trailing
+    backslash or by more deeply indented lines; a synopsis's [optional] brackets are dropped and the first of
+    `a|b` alternatives taken."""
+    lines = ast.get_docstring(ast.parse(path.read_text())).splitlines()
+    name = f"{path.parent.name}/{path.name}"
+    commands = []
+    for i, line in enumerate(lines):
+        if not re.search(rf"\bpython3? {re.escape(name)}(\s|$)", line):
+            continue
+        indent, text = len(line) - len(line.lstrip()), line
+        for more in lines[i + 1:]:
+            if not (text.endswith("\\") or (more.strip() and len(more) - len(more.lstrip()) > indent)):
+                break
+            text = text.removesuffix("\\") + " " + more.strip()
+        tokens = shlex.split(text, comments=True)
+        args = tokens[next(k for k, t in enumerate(tokens) if t.endswith(name)) + 1:]
+        commands.append([_synopsis_token(t) for t in args if _synopsis_token(t)])
+    return commands
+
+
+def _synopsis_token(token: str) -> str:
+    if token.startswith("[-"):  # an optional flag: [--reps 3], [--compile-only], [-- OVERRIDES]
+        token = token[1:]
+    while token.endswith("]") and token.count("]") > token.count("["):
+        token = token[:-1]
+    return token.split("|")[0]
+
+
+def test_a_synopsis_is_read_as_its_arguments():
+    path = REPO / "benchmarks" / "sim_throughput.py"
+    assert documented_commands(path)[0][:4] == ["--tasks", "Pendulum,Humanoid", "--envs", "8192,32768"]
+    assert "--impl" in documented_commands(path)[0] and documented_commands(path)[0][-1] == "auto"
+    rl = documented_commands(REPO / "benchmarks" / "rl.py")
+    assert rl[0] == [] and rl[1][:2] == ["--steps", "262144"] and rl[1][-1] == "rl.train.total_steps=3000000"
+
+
+@pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.stem}")
+def test_help_and_the_documented_commands_parse(path):
+    commands = documented_commands(path)
+    assert commands, f"{path.name}'s docstring documents no `python {path.parent.name}/{path.name} ...` command"
+    proc = subprocess.run([sys.executable, "-c", DRIVER, str(path), json.dumps(commands)], cwd=REPO, env=ENV,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert re.search(r"^usage: ", proc.stdout, re.M), proc.stdout[:500]
+
+
+def rl_benchmark():
+    spec = importlib.util.spec_from_file_location("rl_benchmark", REPO / "benchmarks" / "rl.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_rl_benchmark_gpu_command_sizes_are_whole_batches():
+    """The docstring's GPU command, built here (nothing simulated): 4,096 environments x 16 steps a batch."""
+    args = documented_commands(REPO / "benchmarks" / "rl.py")[1]
+    overrides = args[args.index("--overrides") + 1:]
+    rl = rl_benchmark()
+    assert rl.components("Cartpole", overrides, 262144)[1].train_cfg.total_steps == 262144  # 4 batches
+    assert rl.components("Cartpole", overrides)[1].train_cfg.total_steps == 46 * 4096 * 16  # 3,000,000 rounded up
+
+
+def test_rl_benchmark_runs_on_cpu_at_a_tiny_size():
+    proc = subprocess.run([sys.executable, "benchmarks/rl.py", "--tasks", "Cartpole", "--steps", "100", "--overrides",
+                           "rl.train.num_envs=4", "rl.train.rollout_steps=8", "rl.train.minibatch_size=16",
+                           "rl.train.epochs=1", "rl.train.total_steps=40"], cwd=REPO, env=ENV, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert re.search(r"^\| Cartpole \| 4 \| 128 \|", proc.stdout, re.M), proc.stdout  # 100 steps: 4 batches of 32
+    assert re.search(r"^Cartpole: .* 64 steps", proc.stdout, re.M), proc.stdout  # a budget of 40: 2 batches

@@ -14,7 +14,7 @@ python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 -
     cd "$tmp"
     unzip -q warp_lang-*.whl
     tar -cf - --exclude=warp/bin/warp-clang.so --exclude=warp/examples --exclude=warp/tests \
-        warp warp_lang-*.dist-info | xz -T0 -6 >warp.tar.xz
+        warp warp_lang-*.dist-info | nice xz -T0 -6 >warp.tar.xz
     # 58 MiB leaves room for the repository in the first call's 64 MiB
     split -b 58M warp.tar.xz warp.tar.xz.
     sha256sum warp.tar.xz.* >SHA256SUMS

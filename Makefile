@@ -2,7 +2,7 @@
 PYTHON ?= python3
 PIP = $(PYTHON) -m pip
 
-.PHONY: help install lint test test-fast sweep
+.PHONY: help install lint test test-fast sweep results
 
 help:  ## this list
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
@@ -23,3 +23,6 @@ test-fast:  ## the tests not marked slow
 sweep:  ## a study from sweeps/: make sweep SWEEP=<name> [ARGS="debug=smoke hydra/launcher=local"]
 	@test -f "sweeps/$(SWEEP).yaml" || { echo "make sweep SWEEP=<name>; sweeps: $$(ls sweeps | sed 's/\.yaml$$//' | tr '\n' ' ')" >&2; exit 2; }
 	$(PYTHON) -m bayessim_exp --config-dir sweeps --config-name $(SWEEP) --multirun $(ARGS)
+
+results:  ## docs/results.md from its experiments (benchmarks/results.py): make results [ARGS="--jobs 14 --sections methods"]
+	$(PYTHON) benchmarks/results.py $(ARGS)

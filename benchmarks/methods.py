@@ -36,29 +36,41 @@ def last_round(results: dict, run_dir: Path) -> dict:
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("dirs", nargs="+", type=Path, help="run or sweep directories to search for results.json")
-    args = parser.parse_args()
-    rows: dict[tuple[str, str], list[dict]] = defaultdict(list)
-    for d in args.dirs:
+def finished_runs(dirs: list[Path]) -> dict[tuple[str, str], list[tuple[Path, dict]]]:
+    """(task, method) -> [(run dir, results.json)] of the runs under `dirs` with true parameters and every round."""
+    runs: dict[tuple[str, str], list[tuple[Path, dict]]] = defaultdict(list)
+    for d in dirs:
         for path in sorted(d.rglob("results.json")):
             results = json.loads(path.read_text())
             finished = len(results["rounds"]) == OmegaConf.load(path.parent / "config.yaml").rounds
             if results.get("true_params") and finished:
-                rows[(results["task"], results["method"])].append(last_round(results, path.parent))
-    if not rows:
-        raise SystemExit(f"no finished run with true parameters (results.json) under {args.dirs}")
+                runs[(results["task"], results["method"])].append((path.parent, results))
+    return runs
+
+
+def table(runs: dict[tuple[str, str], list[tuple[Path, dict]]]) -> str:
+    """Markdown: per (task, method), mean ± sd over the seeds, then each seed's value."""
+    rows = {key: [last_round(results, run_dir) for run_dir, results in found] for key, found in runs.items()}
     keys = list(next(iter(rows.values()))[0])
-    print("| task | method | seeds | " + " | ".join(keys) + " |")
-    print("|---|---|---|" + "---|" * len(keys))
-    for (task, method), runs in sorted(rows.items()):
+    lines = ["| task | method | seeds | " + " | ".join(keys) + " |", "|---|---|---|" + "---|" * len(keys)]
+    for (task, method), found in sorted(rows.items()):
         cells = []
         for k in keys:
-            values = [r[k] for r in runs]
+            values = [r[k] for r in found]
             spread = f" ± {statistics.stdev(values):.3g}" if len(values) > 1 else ""
             cells.append(f"{statistics.fmean(values):.3g}{spread} ({', '.join(f'{v:.3g}' for v in values)})")
-        print(f"| {task} | {method} | {len(runs)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {task} | {method} | {len(found)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("dirs", nargs="+", type=Path, help="run or sweep directories to search for results.json")
+    args = parser.parse_args()
+    runs = finished_runs(args.dirs)
+    if not runs:
+        raise SystemExit(f"no finished run with true parameters (results.json) under {args.dirs}")
+    print(table(runs))
 
 
 if __name__ == "__main__":

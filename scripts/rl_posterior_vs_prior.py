@@ -30,6 +30,8 @@ def main() -> None:
     parser.add_argument("--overrides", nargs="*", default=[], help="more Hydra overrides for BayesSim")
     parser.add_argument("--rl-overrides", nargs="*", default=[], help="more overrides for PPO, e.g. rl.train.total_steps=...")
     parser.add_argument("--out", default="docs/figures/rl_posterior_vs_prior")
+    parser.add_argument("--run-dir", default="outputs/rl_posterior_vs_prior",
+                        help="parent of the per-seed run dirs (an existing run dir is resumed)")
     args = parser.parse_args()
     torch.set_num_threads(1)
 
@@ -45,7 +47,7 @@ def main() -> None:
         overrides = [f"task={args.task}", f"seed={seed}", f"rounds={args.rounds}", "logging.progress=false",
                      "diagnostics.predictive_sims=0", *[f"task.real_params.{kv}" for kv in args.real], *args.overrides]
         rl_overrides = ["rl=ppo", f"rl.evaluate.episodes={args.episodes}", "rl.evaluate.video_steps=0", *args.rl_overrides]
-        run_dir = Path("outputs") / "rl_posterior_vs_prior" / f"{args.task}_seed{seed}"
+        run_dir = Path(args.run_dir) / f"{args.task}_seed{seed}"
         t0 = time.perf_counter()
         api.run(overrides, out_dir=run_dir)  # BayesSim only (rl=none): PPO settings do not touch its run dir
         bayessim_seconds = time.perf_counter() - t0
@@ -54,6 +56,7 @@ def main() -> None:
                "posterior_mean": posterior.mean.tolist(), "posterior_std": posterior.stddev.tolist()}
         for train_on in ("posterior", "prior", "nominal"):
             cfg = api.compose(overrides + rl_overrides + [f"rl.train_on={train_on}"])
+            results.setdefault("settings", settings(cfg, run_dir))
             comp = build_components(cfg, check_run_config(cfg))
             ctx = StandaloneRounds(comp, posterior, run_dir / f"ppo_{train_on}").run_round(1)
             row[train_on] = comp.rl.record(ctx)
@@ -62,6 +65,15 @@ def main() -> None:
         results["runs"].append(row)
         out.with_suffix(".json").write_text(json.dumps(results, indent=1))
     plot(results, out.with_suffix(".png"))
+
+
+def settings(cfg, run_dir: Path) -> dict:
+    """What the figure's text quotes about the set-up, from the composed config and the BayesSim run."""
+    bayessim = json.loads((run_dir / "results.json").read_text())
+    return {"prior": bayessim["prior"], "trajectories": cfg.collect.trajectories, "summarizer": cfg.summarizer.name,
+            "model": cfg.model.name, "proposal": cfg.method.proposal, "ppo_steps": cfg.rl.train.total_steps,
+            "ppo_envs": cfg.rl.train.num_envs, "episodes": cfg.rl.evaluate.episodes,
+            "episode_length": cfg.task.episode_length}
 
 
 def plot(results: dict, path: Path) -> None:

@@ -1,0 +1,182 @@
+#!/usr/bin/env bash
+# docs/benchmarks.md's GPU figures for the current code, on a lent GPU machine (NVIDIA H100, Python 3.12 with
+# torch and jax preinstalled, no package registry). Installs the wheels carried in .whl/ into /tmp/site (and
+# MuJoCo Warp when its parts came up, benchmarks/device/README.md), compiles bytecode, then runs the steps named:
+#
+#   bash benchmarks/device/gpu_benchmarks.sh [STEP...]      (no STEP: tests model_fit default_run throughput)
+#   bash benchmarks/device/gpu_benchmarks.sh exec COMMAND...  any command after the same installation
+#
+# Steps:
+#   tests        the MJX tests (whole files: they are marked slow, so no -k "not slow") and the GPU model tests;
+#                fails unless tests of test_mjx.py and test_mjx_constants.py really passed
+#   model_fit    python benchmarks/model_fit.py --epochs 10
+#   default_run  python benchmarks/default_run.py: `device=cuda` ($REPS timed runs after one warm-up), then
+#                `device=cpu sim=native` (one run)
+#   throughput   python benchmarks/sim_throughput.py, Pendulum and Cartpole at 131,072 environments
+#   throughput16k  the same for Ant, BallBalance, Ingenuity and Quadcopter at 16,384
+#   humanoid     python -m bayessim_exp experiment=gpu_humanoid device=cuda, twice (cold, then warm)
+#   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
+#
+# Logs and JSON go to $OUT (./device_out where OUT is unset), one log per step, each headed by the commit, the
+# machine and the date. Every step runs even when an earlier one failed; the exit status is 1 if any failed.
+# Environment: COMMIT (stamped where the copy has no .git), REPS (default 3), BYTECODE=0 (no compileall, as the
+# measurements before 2026-11-22 23:39 UTC), STEP_TIMEOUT (seconds per step, default 540).
+set -uo pipefail
+
+cd "$(dirname "$0")/../.."
+PY=${PYTHON:-python3}
+OUT=${OUT:-$PWD/device_out}
+SITE=${SITE:-/tmp/site}
+WARP_PARTS=/tmp/warp_parts
+mkdir -p "$OUT"
+export PY OUT PYTHONPATH="$SITE:$PWD/src" PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
+
+say() { echo "[gpu_benchmarks $(date -u +%H:%M:%S)] $*"; }
+
+install_wheels() {
+    local stamp
+    stamp=$(ls .whl/*.whl 2>/dev/null | xargs -r -n1 basename | sort | sha256sum | cut -c1-16)
+    if [ -f "$SITE/.installed" ] && [ "$(cat "$SITE/.installed")" = "$stamp" ]; then
+        say "wheels already installed in $SITE"
+    elif ls .whl/*.whl >/dev/null 2>&1; then
+        say "installing $(ls .whl/*.whl | wc -l) wheels into $SITE"
+        "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/*.whl \
+            || return 1
+        echo "$stamp" >"$SITE/.installed"
+    fi
+    "$PY" -c "import mujoco, mujoco.mjx, hydra, torchrl" || { say "packages missing: carry .whl (benchmarks/device/README.md)"; return 1; }
+}
+
+# warp-lang goes up in parts over two calls to one warm machine (README.md); install once every part is here
+install_warp() {
+    mkdir -p "$WARP_PARTS"
+    cp -n .warp/*/warp.tar.xz.* .warp/*/SHA256SUMS "$WARP_PARTS"/ 2>/dev/null
+    [ -f "$WARP_PARTS/SHA256SUMS" ] || return 0
+    [ -d "$SITE/warp" ] && return 0
+    if ! (cd "$WARP_PARTS" && sha256sum --quiet -c SHA256SUMS >/dev/null 2>&1); then
+        say "Warp: $(ls "$WARP_PARTS" | grep -c 'tar.xz') of $(wc -l <"$WARP_PARTS/SHA256SUMS") parts here; not installed yet"
+        return 0
+    fi
+    say "installing warp-lang from its parts"
+    cat "$WARP_PARTS"/warp.tar.xz.* | "$PY" -c "import sys, tarfile
+tarfile.open(fileobj=sys.stdin.buffer, mode='r|xz').extractall('$SITE', filter='data')" || return 1
+}
+
+compile_bytecode() {
+    [ "${BYTECODE:-1}" = 0 ] && { say "bytecode not compiled (BYTECODE=0)"; return 0; }
+    [ -f "$SITE/.compiled" ] && return 0
+    # the image sets PYTHONDONTWRITEBYTECODE=1 and ships no .pyc: every process would compile its imports
+    say "compiling bytecode"
+    "$PY" -m compileall -q -j 16 "$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')" "$SITE" src \
+        >/dev/null 2>&1  # some packages ship files that do not compile (templates, Python 2 tests): not an error here
+    touch "$SITE/.compiled"
+}
+
+stamp() {
+    local commit
+    commit=$(git rev-parse --short HEAD 2>/dev/null) || commit=${COMMIT:-unknown (no .git in this copy; set COMMIT)}
+    echo "commit: $commit"
+    echo "date: $(date -u '+%Y-%m-%d %H:%M:%S UTC')"
+    echo "machine: $(hostname), $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
+    echo "gpu: $(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || echo none)"
+    "$PY" - <<'EOF'
+import importlib.metadata as md
+import sys
+names = ["torch", "jax", "mujoco", "mujoco-mjx", "warp-lang", "hydra-core", "torchrl"]
+versions = []
+for name in names:
+    try:
+        versions.append(f"{name} {md.version(name)}")
+    except md.PackageNotFoundError:
+        versions.append(f"{name} -")
+print(f"python {sys.version.split()[0]}; " + ", ".join(versions))
+EOF
+}
+
+step_tests() {
+    local xml=/tmp/gpu_tests.xml
+    "$PY" -m pytest -q -rs -p no:cacheprovider --durations=15 --junitxml="$xml" \
+        tests/unit/test_mjx.py tests/unit/test_mjx_constants.py tests/unit/test_mjx_tuning.py \
+        tests/unit/test_trace_cache.py tests/unit/test_models.py tests/unit/test_adam.py \
+        tests/unit/test_mixture_nll.py tests/unit/test_mdnn.py || return 1
+    # a selection that deselects or skips every MJX test passes too: check that the MJX-against-native ones ran
+    "$PY" - "$xml" <<'EOF'
+import sys
+import xml.etree.ElementTree as ET
+passed = {"test_mjx_trajectories_match_native": 0, "test_device_leaves_equal_mujoco_set_const": 0}
+for case in ET.parse(sys.argv[1]).iter("testcase"):
+    name = case.get("name", "").split("[")[0]
+    if name in passed and not any(c.tag in ("skipped", "failure", "error") for c in case):
+        passed[name] += 1
+print("MJX against native MuJoCo, cases passed:", passed)
+sys.exit(0 if all(passed.values()) else 1)
+EOF
+}
+
+step_model_fit() { "$PY" benchmarks/model_fit.py --epochs 10; }
+
+step_default_run() {
+    "$PY" benchmarks/default_run.py --reps "${REPS:-3}" --warmup 1 --variant gpu device=cuda \
+        --json "$OUT/default_run_gpu.json" || return 1
+    "$PY" benchmarks/default_run.py --reps 1 --warmup 0 --variant cpu device=cpu sim=native \
+        --json "$OUT/default_run_cpu.json"
+}
+
+step_throughput() {
+    "$PY" benchmarks/sim_throughput.py --tasks Pendulum,Cartpole --envs 131072 --baseline-envs 131072 \
+        --rows native,mjx-fixed,mjx --native-envs 8192 --horizon 50 --reps 5 --cache-dir /tmp/jax_cache \
+        --json "$OUT/throughput_131072.json"
+}
+
+step_throughput16k() {
+    "$PY" benchmarks/sim_throughput.py --tasks Ant,BallBalance,Ingenuity,Quadcopter --envs 16384 \
+        --baseline-envs 16384 --rows native,mjx-fixed,mjx --native-envs 8192 --native-horizon 5 --horizon 50 \
+        --reps 2 --cache-dir /tmp/jax_cache --json "$OUT/throughput_16384.json"
+}
+
+step_humanoid() {
+    "$PY" -m bayessim_exp experiment=gpu_humanoid device=cuda logging.progress=false \
+        hydra.run.dir=/tmp/humanoid_cold || return 1
+    "$PY" -m bayessim_exp experiment=gpu_humanoid device=cuda logging.progress=false hydra.run.dir=/tmp/humanoid_warm
+}
+
+run_step() {  # run_step NAME: step_NAME logged to $OUT/NAME.log, stopped after STEP_TIMEOUT seconds
+    local name=$1 log="$OUT/$1.log"
+    { stamp; echo "step: $name"; echo; } >"$log"
+    say "$name"
+    timeout "${STEP_TIMEOUT:-540}" bash -c "$(declare -f "step_$name"); step_$name" >>"$log" 2>&1 </dev/null
+    local rc=$?
+    tail -n 40 "$log"
+    if [ $rc = 0 ]; then say "$name: ok"; else say "$name: FAILED ($rc)"; fi
+    return $rc
+}
+
+if [ "${1:-}" = stash-warp ] && [ $# = 1 ]; then  # the first Warp call carries no wheels
+    install_warp
+    exit $?
+fi
+install_wheels || exit 1
+install_warp || exit 1
+compile_bytecode
+"$PY" -c "import jax; d = jax.devices()[0]; print('JAX device:', d); assert d.platform == 'gpu'" \
+    || { say "JAX sees no GPU"; exit 1; }
+
+if [ "${1:-}" = exec ]; then
+    shift
+    { stamp; echo "command: $*"; echo; } | tee "$OUT/exec.log"
+    "$@" 2>&1 | tee -a "$OUT/exec.log"
+    exit "${PIPESTATUS[0]}"
+fi
+
+[ $# = 0 ] && set -- tests model_fit default_run throughput
+failed=()
+for step in "$@"; do
+    case $step in
+        stash-warp) ;;
+        tests|model_fit|default_run|throughput|throughput16k|humanoid)
+            run_step "$step" || failed+=("$step") ;;
+        *) say "unknown step: $step"; failed+=("$step") ;;
+    esac
+done
+[ ${#failed[@]} = 0 ] || { say "failed: ${failed[*]}"; exit 1; }
+say "all steps passed; outputs in $OUT"

@@ -1,0 +1,308 @@
+"""The sections of docs/results.md (benchmarks/results.py assembles them): each declares the jobs (commands) its
+experiment runs and renders its markdown from their outputs. Prose that quotes no number lives in
+benchmarks/results_templates/<name>.md; every sentence with a number is written here from the measured values.
+
+A section has `name`, `jobs(ctx) -> [Job]` and `render(ctx, stamp) -> markdown`. Besides the built-in ones:
+  ScriptSection(name, script, args, quick_args)  a script that prints its section (heading first) to stdout
+  StaticSection(name)                            the template's text as it stands (measured elsewhere)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import statistics
+import sys
+from pathlib import Path
+from string import Template
+
+from omegaconf import OmegaConf
+
+ROOT = Path(__file__).resolve().parents[1]
+TEMPLATES = ROOT / "benchmarks" / "results_templates"
+sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "scripts"))
+import methods  # noqa: E402  benchmarks/methods.py
+
+# every job runs on the CPU on one thread, so that 14 jobs share 16 cores without a GPU in the way
+CPU_JOB = ["sim=native", "sim.nthread=1", "device=cpu", "logging.progress=false"]
+
+
+class SectionError(RuntimeError):
+    """A section's jobs did not leave what its text needs."""
+
+
+@dataclasses.dataclass
+class Job:
+    name: str               # unique, also its log's name
+    argv: list[str]
+    cost: float             # estimated seconds on one core at the full budget: the longest start first
+    stdout: Path | None = None  # where stdout goes (stderr to the log); None: both to the log
+
+
+@dataclasses.dataclass
+class Context:
+    work: Path              # this section's runs and outputs (emptied before its jobs start)
+    figures: Path           # where figures go (docs/figures in the full mode)
+    quick: bool
+    jobs: int               # processes at a time, quoted in the text
+
+
+def template(name: str) -> Template:
+    return Template((TEMPLATES / f"{name}.md").read_text())
+
+
+def python_command(argv: list[str]) -> str:
+    """A job's command as the text quotes it: `python ...`, without the work directories it was given."""
+    shown, skip = ["python"], False
+    for arg in argv[1:]:
+        if not skip and not arg.startswith("hydra.run.dir=") and arg not in ("--out", "--run-dir"):
+            shown.append(arg)
+        skip = arg in ("--out", "--run-dir")
+    return " ".join(shown)
+
+
+def spread(values: list[float], fmt: str) -> str:
+    lo, hi = min(values), max(values)
+    return format(lo, fmt) if format(lo, fmt) == format(hi, fmt) else f"{lo:{fmt}}–{hi:{fmt}}"
+
+
+class MethodsSection:
+    """SimOpt against BayesSim: the jobs of sweeps/methods.yaml, one process each, and SimOpt in closed loop."""
+
+    name = "methods"
+    sweep = ROOT / "sweeps" / "methods.yaml"
+    costs = {("Cartpole", "bayessim"): 240, ("Cartpole", "simopt"): 150, ("Pendulum", "bayessim"): 120,
+             ("Pendulum", "simopt"): 60}
+
+    def grid(self, quick: bool) -> list[dict]:
+        params = OmegaConf.to_container(OmegaConf.load(self.sweep).hydra.sweeper.params)
+        values = {k: _sweep_values(str(v)) for k, v in params.items()}
+        if quick:
+            values = {"task": ["Pendulum"], "method": values["method"], "seed": [0]}
+        return [dict(zip(values, combo)) for combo in itertools.product(*values.values())]
+
+    def jobs(self, ctx: Context) -> list[Job]:
+        budget = ["debug=smoke"] if ctx.quick else []
+        out = []
+        for point in self.grid(ctx.quick):
+            label = f"{point['task']}_{point['method']}_seed{point['seed']}"
+            argv = [sys.executable, "-m", "bayessim_exp", *[f"{k}={v}" for k, v in point.items()], *CPU_JOB, *budget,
+                    f"hydra.run.dir={ctx.work / 'sweep' / label}"]
+            out.append(Job(f"methods/{label}", argv, self.costs.get((point["task"], point["method"]), 120)))
+        argv = [sys.executable, "-m", "bayessim_exp", "task=Pendulum", "method=simopt", "method.rollout=closed_loop",
+                "seed=0", *CPU_JOB, *budget, f"hydra.run.dir={ctx.work / 'closed_loop'}"]
+        return out + [Job("methods/closed_loop", argv, 60)]
+
+    def render(self, ctx: Context, stamp: str) -> str:
+        runs = methods.finished_runs([ctx.work / "sweep"])
+        expected = {(p["task"], p["method"]) for p in self.grid(ctx.quick)}
+        if set(runs) != expected or len({len(v) for v in runs.values()}) != 1:
+            raise SectionError(f"finished runs {sorted((k, len(v)) for k, v in runs.items())}, expected {sorted(expected)}")
+        closed = methods.finished_runs([ctx.work / "closed_loop"])
+        if not closed:
+            raise SectionError("the closed-loop run did not finish")
+        jobs = self.jobs(ctx)
+        budget = " debug=smoke" if ctx.quick else ""
+        commands = (f"python -m bayessim_exp task=T method=M seed=S {' '.join(CPU_JOB)}{budget}   # each (T, M, S) "
+                    f"of sweeps/methods.yaml\n{python_command(jobs[-1].argv)}")
+        reading = [self._task_bullet(task, runs) for task in sorted({t for t, _ in runs})]
+        reading.append(self._closed_loop_bullet(runs, next(iter(closed.values()))[0]))
+        sweep_dir = ctx.work / "sweep"
+        return template(self.name).substitute(
+            stamp=stamp, settings=self._settings(runs), commands=commands, jobs=len(jobs) - 1, table=methods.table(runs),
+            sweep_dir=sweep_dir.relative_to(ROOT) if sweep_dir.is_relative_to(ROOT) else sweep_dir,
+            seeds=", ".join(str(r["seed"]) for _, r in next(iter(runs.values()))), parallel=ctx.jobs,
+            reading="\n".join(reading))
+
+    @staticmethod
+    def _settings(runs: dict) -> str:
+        cfgs = {key: OmegaConf.load(found[0][0] / "config.yaml") for key, found in runs.items()}
+        any_cfg = next(iter(cfgs.values()))
+        bayessim = {t: c for (t, m), c in sorted(cfgs.items()) if m == "bayessim"}
+        simopt = next((c for (_, m), c in cfgs.items() if m == "simopt"), None)
+        text = (f"Default settings of both methods: {any_cfg.rounds} rounds, {any_cfg.real.per_round} new surrogate-real "
+                f"roll-out(s) per round ({any_cfg.collect.horizon} steps, `{any_cfg.policy.name}` collect policy), "
+                f"{any_cfg.collect.trajectories:,} parameter draws per round.")
+        if bayessim:
+            first = next(iter(bayessim.values()))
+            text += (f" BayesSim (`method.proposal={first.method.proposal} method.parameter_space="
+                     f"{first.method.parameter_space}`) with each task's defaults: " + ", ".join(
+                         f"{t} `model={c.model.name} summarizer={c.summarizer.name}`" for t, c in bayessim.items()) + ".")
+        if simopt is not None:
+            text += (f" SimOpt: {simopt.method.updates} REPS updates of "
+                     f"{simopt.collect.trajectories // simopt.method.updates:,} draws per round, each draw rolled out "
+                     f"from every real roll-out's start (`method.rollout={simopt.method.rollout}`).")
+        return text
+
+    @staticmethod
+    def _task_bullet(task: str, runs: dict) -> str:
+        b, s = runs[(task, "bayessim")], runs[(task, "simopt")]
+        error = {name: [methods.last_round(r, d)["mean error / range"] for d, r in found]
+                 for name, found in (("BayesSim", b), ("SimOpt", s))}
+        gain = {name: [r["rounds"][-1]["log_prob_gain"] for _, r in found] for name, found in (("BayesSim", b), ("SimOpt", s))}
+        eb, es = statistics.fmean(error["BayesSim"]), statistics.fmean(error["SimOpt"])
+        closer, ratio = ("SimOpt", eb / es) if es < eb else ("BayesSim", es / eb)
+        names = b[0][1]["param_names"]
+        text = (f"- **{task}** ({len(names)} parameters, means over {len(b)} seeds): mean error / range "
+                f"{eb:.2g} (BayesSim) and {es:.2g} (SimOpt), {closer}'s {ratio:.1f}x closer; gain over the prior "
+                f"{statistics.fmean(gain['BayesSim']):+.2f} and {statistics.fmean(gain['SimOpt']):+.2f} nats.")
+        min_std = OmegaConf.load(s[0][0] / "config.yaml").method.min_std
+        floored = sum(all(_last(r, "posterior_std")[n] <= 1.02 * min_std * _width(r, n) for n in names) for _, r in s)
+        if floored:
+            text += (f" SimOpt's spread sits at its floor (`method.min_std` = {min_std} of each range) in {floored} of "
+                     f"{len(s)} seeds: its log density at the truth there is the floor's, not a measured uncertainty.")
+        worst = max(names, key=lambda n: statistics.fmean(abs(_last(r, "posterior_mean")[n] - r["true_params"][n])
+                                                           / _width(r, n) for _, r in s))
+        true = s[0][1]["true_params"][worst]
+        described = []
+        for name, found in (("SimOpt", s), ("BayesSim", b)):
+            means = [_last(r, "posterior_mean")[worst] for _, r in found]
+            stds = [_last(r, "posterior_std")[worst] for _, r in found]
+            sigmas = [abs(m - true) / sd for m, sd in zip(means, stds)]
+            described.append(f"{name} {spread(means, '.3g')} ± {spread(stds, '.2g')}, the truth "
+                             f"{spread(sigmas, '.1f')} of its standard deviations away")
+        return text + f" The parameter SimOpt misses most is `{worst}` (true {true:.3g}): " + "; ".join(described) + "."
+
+    @staticmethod
+    def _closed_loop_bullet(runs: dict, closed: tuple[Path, dict]) -> str:
+        run_dir, r = closed
+        names = r["param_names"]
+        recorded_dir, recorded = next((d, res) for d, res in runs[("Pendulum", "simopt")] if res["seed"] == r["seed"])
+        ended = ", ".join(f"{n} {_last(r, 'posterior_mean')[n]:.3g} ± {_last(r, 'posterior_std')[n]:.2g} "
+                          f"(true {r['true_params'][n]:.3g})" for n in names)
+        error = methods.last_round(r, run_dir)["mean error / range"]
+        error_recorded = methods.last_round(recorded, recorded_dir)["mean error / range"]
+        return (f"- **Closed loop with the random policy**: the Pendulum run with `method.rollout=closed_loop` (seed "
+                f"{r['seed']}, fresh random actions in every simulation) ended at {ended}: mean error {error:.2g} of the "
+                f"range against {error_recorded:.2g} with `recorded` (same seed), {_last(r, 'log_prob_true_posterior'):+.2f} "
+                f"nats at the truth, {_last(r, 'log_prob_gain'):+.2f} against the prior.")
+
+
+class RlSection:
+    """PPO trained on the posterior, on the prior and on nominal parameters (scripts/rl_posterior_vs_prior.py), one
+    process per seed; the figure and its JSON go to ctx.figures."""
+
+    name = "rl_posterior_vs_prior"
+    seeds = (0, 1, 2)
+
+    def _argv(self, ctx: Context, seed: int) -> list[str]:
+        budget = ["--rounds", "1", "--episodes", "2", "--overrides", *CPU_JOB, "debug=smoke"] if ctx.quick else [
+            "--overrides", *CPU_JOB]
+        return [sys.executable, "scripts/rl_posterior_vs_prior.py", "--seeds", str(seed), *budget,
+                "--out", str(ctx.work / f"seed{seed}"), "--run-dir", str(ctx.work / "runs")]
+
+    def jobs(self, ctx: Context) -> list[Job]:
+        seeds = self.seeds[:1] if ctx.quick else self.seeds
+        return [Job(f"{self.name}/seed{seed}", self._argv(ctx, seed), 330) for seed in seeds]
+
+    def render(self, ctx: Context, stamp: str) -> str:
+        from rl_posterior_vs_prior import plot
+
+        parts = [json.loads((ctx.work / f"seed{s}.json").read_text()) for s in
+                 (self.seeds[:1] if ctx.quick else self.seeds)]
+        results = {**parts[0], "runs": [run for p in parts for run in p["runs"]]}
+        ctx.figures.mkdir(parents=True, exist_ok=True)
+        (ctx.figures / f"{self.name}.json").write_text(json.dumps(results, indent=1))
+        plot(results, ctx.figures / f"{self.name}.png")
+        return template(self.name).substitute(stamp=stamp, **self._values(ctx, results))
+
+    def _values(self, ctx: Context, results: dict) -> dict:
+        runs, cfg = results["runs"], results["settings"]
+        real = dict(kv.split("=") for kv in results["real"])
+        mass, length = float(real["mass"]), float(real["length"])
+        low, high = cfg["prior"]["low"], cfg["prior"]["high"]
+        names = ("posterior", "prior", "nominal")
+        labels = (f"round-{results['rounds']} posterior", "uniform prior", "nominal (the MJCF's)")
+        score = {n: [r[n]["surrogate_real_return"]["mean"] for r in runs] for n in names}
+        sd = {n: f"{statistics.stdev(v):.1f}" if len(v) > 1 else "-" for n, v in score.items()}
+        rows = [f"| {label} | " + " | ".join(f"{v:.1f}" for v in score[n]) + f" | **{statistics.fmean(score[n]):.1f}** | "
+                f"{sd[n]} |" for n, label in zip(names, labels)]
+        seeds = [r["seed"] for r in runs]
+        margins = [post - max(prior, nominal) for post, prior, nominal in zip(*score.values())]
+        best = [m for m in margins if m > 0]
+        order = sorted(names, key=lambda n: -statistics.fmean(score[n]))
+        posterior = "; ".join(f"seed {r['seed']}: " + ", ".join(
+            f"{n} {m:.3g} ± {s:.2g}" for n, m, s in zip(("mass", "length"), r["posterior_mean"], r["posterior_std"]))
+            for r in runs)
+        ppo_seconds = [r[n]["rl_training"]["seconds"] for r in runs for n in names]
+        what = [
+            f"- The posterior-trained policy scored best on {len(best)} of {len(runs)} seeds"
+            + (f", by {spread(best, '.0f')} over the next best there" if best else "")
+            + ". Ordered by the mean over seeds: " + ", ".join(f"{n} {statistics.fmean(score[n]):.1f}" for n in order) + ".",
+            f"- Best and worst of the {cfg['episodes']} episodes, per seed: " + "; ".join(
+                f"{n} " + ", ".join(f"{r[n]['surrogate_real_return']['max']:.0f} / {r[n]['surrogate_real_return']['min']:.0f}"
+                                    for r in runs) for n in names) + ".",
+            "- PPO's mean training return in its last batch, per seed (on the distribution it trained on): " + "; ".join(
+                f"{n} " + ", ".join(_number(r[n]["rl_training"]["last_episode_return"]) for r in runs) for n in names) + ".",
+        ]
+        return {
+            "task": results["task"], "mass": f"{mass:g}", "length": f"{length:g}",
+            "mass_low": f"{low['mass']:g}", "mass_high": f"{high['mass']:g}",
+            "length_low": f"{low['length']:g}", "length_high": f"{high['length']:g}",
+            "torque": f"{mass * 9.81 * length / 2:.1f}", "seeds": ", ".join(map(str, seeds)), "n_seeds": len(seeds),
+            "rounds": results["rounds"], "trajectories": f"{cfg['trajectories']:,}", "summarizer": cfg["summarizer"],
+            "model": cfg["model"], "proposal": cfg["proposal"], "ppo_steps": f"{cfg['ppo_steps']:,}",
+            "ppo_envs": cfg["ppo_envs"], "episodes": cfg["episodes"], "episode_length": cfg["episode_length"],
+            "command": python_command(self._argv(ctx, 0)).replace("--seeds 0", "--seeds S"),
+            "header": "| trained on | " + " | ".join(f"seed {s}" for s in seeds) + " | mean over seeds | sd over seeds |",
+            "rule": "|---|" + "---:|" * (len(seeds) + 2), "rows": "\n".join(rows), "posteriors": posterior,
+            "bayessim_seconds": spread([r["bayessim_seconds"] for r in runs], ".0f"),
+            "ppo_seconds": spread(ppo_seconds, ".0f"), "parallel": ctx.jobs, "what": "\n".join(what),
+        }
+
+
+@dataclasses.dataclass
+class ScriptSection:
+    """A script that prints its section's markdown, heading first, to stdout (its progress goes to stderr)."""
+
+    name: str
+    script: str                          # relative to the repository root
+    args: tuple[str, ...] = ()           # the full budget
+    quick_args: tuple[str, ...] = ()     # the tiny one
+    cost: float = 300.0
+
+    def jobs(self, ctx: Context) -> list[Job]:
+        argv = [sys.executable, self.script, *(self.quick_args if ctx.quick else self.args)]
+        return [Job(self.name, argv, self.cost, stdout=ctx.work / "section.md")]
+
+    def render(self, ctx: Context, stamp: str) -> str:
+        lines = (ctx.work / "section.md").read_text().strip().splitlines()
+        if not lines:
+            raise SectionError(f"{self.script} printed nothing")
+        command = f"`{python_command(self.jobs(ctx)[0].argv)}`: {stamp}"
+        if lines[0].startswith("#"):
+            return "\n".join([lines[0], "", command, *lines[1:]])
+        return "\n".join([command, "", *lines])
+
+
+@dataclasses.dataclass
+class StaticSection:
+    """The template's text as it stands: measured elsewhere, with its own command and date."""
+
+    name: str
+
+    def jobs(self, ctx: Context) -> list[Job]:
+        return []
+
+    def render(self, ctx: Context, stamp: str) -> str:
+        return (TEMPLATES / f"{self.name}.md").read_text()
+
+
+def _sweep_values(value: str) -> list:
+    if value.startswith("range("):
+        return list(range(*map(int, value[len("range("):-1].split(","))))
+    return value.split(",")
+
+
+def _last(results: dict, key: str):
+    return results["rounds"][-1][key]
+
+
+def _width(results: dict, name: str) -> float:
+    return results["prior"]["high"][name] - results["prior"]["low"][name]
+
+
+def _number(value: float | None) -> str:
+    return "-" if value is None else f"{value:.0f}"

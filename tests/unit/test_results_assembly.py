@@ -1,0 +1,103 @@
+"""benchmarks/results.py assembles docs/results.md: the committed page is a fixed point of the assembly, a
+regenerated section replaces only its own block, and every section renders from canned outputs of its jobs
+(the end-to-end --quick run is tests/integration/test_results_quick.py)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+import results  # noqa: E402  benchmarks/results.py
+from results_sections import Context, MethodsSection, RlSection, ScriptSection, StaticSection  # noqa: E402
+
+
+def test_the_committed_page_is_what_the_assembler_writes_from_it():
+    page = (ROOT / "docs" / "results.md").read_text()
+    assert results.assemble(page, {}) == page
+    assert [name for name, _ in results.BLOCK.findall(page)] == [s.name for s in results.SECTIONS]
+
+
+def test_a_regenerated_section_replaces_its_block_only_and_a_missing_one_is_named():
+    page = results.assemble("", {"methods": "## Methods\n\nnew text"})
+    assert "new text" in page and "--sections rl_posterior_vs_prior" in page
+    again = results.assemble(page, {"rl_posterior_vs_prior": "## PPO\n\nppo text"})
+    assert "new text" in again and "ppo text" in again and "Not generated yet" not in again.split("end methods")[0]
+
+
+def _fake_run(path: Path, task: str, method: str, seed: int, names: list[str], mean: float, std: float) -> None:
+    path.mkdir(parents=True)
+    cfg = {"rounds": 2, "real": {"per_round": 1}, "collect": {"horizon": 20, "trajectories": 300},
+           "policy": {"name": "random"}, "model": {"name": "mdnn"}, "summarizer": {"name": "start"},
+           "method": {"name": method, "updates": 5, "min_std": 0.005, "rollout": "recorded", "proposal": "truncated",
+                      "parameter_space": "auto"}}
+    (path / "config.yaml").write_text(yaml.safe_dump(cfg))
+    last = {"posterior_mean": {n: mean for n in names}, "posterior_std": {n: std for n in names},
+            "log_prob_true_posterior": 1.5, "log_prob_gain": 1.0, "real_trajectories": 2, "sim_trajectories": 300}
+    (path / "results.json").write_text(json.dumps({
+        "task": task, "method": method, "seed": seed, "param_names": names, "true_params": {n: 1.0 for n in names},
+        "prior": {"low": {n: 0.5 for n in names}, "high": {n: 2.0 for n in names}}, "rounds": [last, last]}))
+
+
+def test_the_methods_section_quotes_what_its_runs_measured(tmp_path):
+    ctx = Context(work=tmp_path, figures=tmp_path / "figures", quick=False, jobs=14)
+    section = MethodsSection()
+    for point in section.grid(quick=False):
+        simopt = point["method"] == "simopt"
+        names = ["mass", "length"] if point["task"] == "Pendulum" else ["cart_mass", "pole_mass", "motor_gain"]
+        _fake_run(tmp_path / "sweep" / f"{point['task']}_{point['method']}_{point['seed']}", point["task"],
+                  point["method"], point["seed"], names, 1.0 + (0.001 if simopt else 0.1 + 0.01 * point["seed"]),
+                  0.0075 if simopt else 0.05)
+    _fake_run(tmp_path / "closed_loop", "Pendulum", "simopt", 0, ["mass", "length"], 1.6, 0.2)
+    text = section.render(ctx, "STAMP")
+    assert text.startswith("## SimOpt and BayesSim") and "STAMP" in text and "$" not in text
+    assert "| Pendulum | simopt | 3 |" in text and "| Cartpole | bayessim | 3 |" in text
+    assert "mean error / range 0.073 (BayesSim) and 0.00067 (SimOpt), SimOpt's 110.0x closer" in text
+    assert "at its floor (`method.min_std` = 0.005 of each range) in 3 of 3 seeds" in text
+    assert "mean error 0.4 of the range against 0.00067 with `recorded`" in text
+
+
+def test_the_ppo_section_writes_its_figure_and_table(tmp_path):
+    ctx = Context(work=tmp_path, figures=tmp_path / "figures", quick=False, jobs=14)
+    settings = {"prior": {"low": {"mass": 0.5, "length": 0.25}, "high": {"mass": 2.0, "length": 1.0}},
+                "trajectories": 10000, "summarizer": "start", "model": "mdnn", "proposal": "truncated",
+                "ppo_steps": 150000, "ppo_envs": 64, "episodes": 32, "episode_length": 200}
+    for seed in RlSection.seeds:
+        def policy(score, seed=seed):
+            return {"surrogate_real_return": {"mean": score - seed, "min": score - 500, "max": score + 300},
+                    "rl_training": {"seconds": 40.0 + seed, "last_episode_return": -600.0}}
+        run = {"seed": seed, "bayessim_seconds": 90.0, "posterior_mean": [1.7, 0.9], "posterior_std": [0.1, 0.005],
+               "posterior": policy(-340.0), "prior": policy(-1000.0), "nominal": policy(-700.0)}
+        (tmp_path / f"seed{seed}.json").write_text(json.dumps(
+            {"task": "Pendulum", "real": ["mass=1.8", "length=0.9"], "rounds": 2, "settings": settings, "runs": [run]}))
+    text = RlSection().render(ctx, "STAMP")
+    assert "$" not in text and "gravity torque of up to 7.9 N m" in text
+    assert "| round-2 posterior | -340.0 | -341.0 | -342.0 | **-341.0** | 1.0 |" in text
+    assert "scored best on 3 of 3 seeds, by 360 over the next best there" in text
+    assert json.loads((ctx.figures / "rl_posterior_vs_prior.json").read_text())["rounds"] == 2
+    assert (ctx.figures / "rl_posterior_vs_prior.png").stat().st_size > 0
+
+
+def test_a_script_section_is_its_scripts_stdout_under_the_stamp_and_a_failing_one_is_reported(tmp_path, capsys):
+    script = tmp_path / "section.py"
+    script.write_text("import sys\nprint('## Foreign dynamics\\n\\nA table.')\nprint('progress', file=sys.stderr)\n")
+    broken = tmp_path / "broken.py"
+    broken.write_text("raise SystemExit('no data')\n")
+    ctx = Context(work=tmp_path / "work", figures=tmp_path, quick=True, jobs=2)
+    good, bad = ScriptSection("foreign", str(script), quick_args=("--tiny",)), ScriptSection("bad", str(broken))
+    seconds = results.run_jobs(good.jobs(ctx) + bad.jobs(ctx), 2, tmp_path / "logs")
+    assert seconds["bad"] is None and "no data" in capsys.readouterr().out
+    assert good.render(ctx, "STAMP").splitlines() == [
+        "## Foreign dynamics", "", f"`python {script} --tiny`: STAMP", "", "A table."]
+    assert StaticSection("real_data").render(ctx, "STAMP").startswith("## Real data from an independent pendulum")
+
+
+def test_quick_mode_refuses_to_write_into_docs(monkeypatch):
+    monkeypatch.setattr(sys, "argv", ["results.py", "--quick", "--out", str(ROOT / "docs" / "results.md")])
+    with pytest.raises(SystemExit, match="outside docs"):
+        results.main()

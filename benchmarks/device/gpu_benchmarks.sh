@@ -16,6 +16,11 @@
 #   throughput16k  the same for Ant, BallBalance, Ingenuity and Quadcopter at 16,384
 #   humanoid     python -m bayessim_exp experiment=gpu_humanoid device=cuda, twice (cold, then warm)
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
+#   calibration  the known-truth calibration study: sweeps/calibration.yaml (Pendulum, $SEEDS seeds, default 100)
+#                with device=cuda, $JOBS runs at once on the GPU (default 6), then its report (tarred into $OUT)
+#   round_coverage  benchmarks/round_coverage.py: every task's default run, seed 0, device=cuda, 3 at once
+#   foreign      benchmarks/foreign_dynamics.py on the CPUs (14 runs at once)
+#   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
 #
 # Logs and JSON go to $OUT (./device_out where OUT is unset), one log per step, each headed by the commit, the
 # machine and the date. Every step runs even when an earlier one failed; the exit status is 1 if any failed.
@@ -140,6 +145,29 @@ step_humanoid() {
     "$PY" -m bayessim_exp experiment=gpu_humanoid device=cuda logging.progress=false hydra.run.dir=/tmp/humanoid_warm
 }
 
+step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with their report
+    timeout "${SWEEP_TIMEOUT:-480}" "$PY" -m bayessim_exp --config-dir sweeps --config-name calibration --multirun \
+        device=cuda "hydra.sweeper.params.seed=range(${SEEDS:-100})" hydra/launcher=local \
+        "hydra.launcher.n_jobs=${JOBS:-6}" hydra.sweep.dir=/tmp/calibration ${CALIBRATION_ARGS:-}
+    local rc=$?
+    "$PY" -m bayessim_exp.report /tmp/calibration
+    (cd /tmp && tar -czf "$OUT/calibration.tar.gz" calibration/report calibration/*/results.json \
+        calibration/*/config.yaml calibration/*/.hydra calibration/*/error.txt 2>/dev/null)
+    return $rc
+}
+
+step_round_coverage() {
+    "$PY" benchmarks/round_coverage.py --jobs 3 --out /tmp/round_coverage --json "$OUT/round_coverage.json" device=cuda
+}
+
+step_foreign() {
+    "$PY" benchmarks/foreign_dynamics.py --jobs 14 --out /tmp/foreign && cp /tmp/foreign/foreign_dynamics.json "$OUT/"
+}
+
+step_results() {
+    "$PY" benchmarks/results.py --jobs 14 && cp docs/results.md docs/figures/rl_posterior_vs_prior.* "$OUT/"
+}
+
 run_step() {  # run_step NAME: step_NAME logged to $OUT/NAME.log, stopped after STEP_TIMEOUT seconds
     local name=$1 log="$OUT/$1.log"
     { stamp; echo "step: $name"; echo; } >"$log"
@@ -173,7 +201,7 @@ failed=()
 for step in "$@"; do
     case $step in
         stash-warp) ;;
-        tests|model_fit|default_run|throughput|throughput16k|humanoid)
+        tests|model_fit|default_run|throughput|throughput16k|humanoid|calibration|round_coverage|foreign|results)
             run_step "$step" || failed+=("$step") ;;
         *) say "unknown step: $step"; failed+=("$step") ;;
     esac

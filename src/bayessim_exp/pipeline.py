@@ -145,7 +145,7 @@ def _numbers(record: dict, prefix: str = "") -> dict[str, float]:
             out.update(_numbers(value, tag + "/"))
         elif isinstance(value, (bool, int, float, np.floating)) and key != "round":
             out[tag] = float(value)
-        elif isinstance(value, list) and value and all(isinstance(v, str) for v in value):
+        elif key in ("warnings", "reasons"):
             out[tag] = float(len(value))
     return out
 

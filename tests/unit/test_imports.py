@@ -15,7 +15,7 @@ def test_a_pipeline_process_fits_a_model_and_checks_mismatch_without_dynamo_scip
             "cfg = api.compose(['model.max_epochs=2']); "
             "m = registry.build('model', cfg.model, theta_dim=2, x_dim=3); "
             "m.fit(torch.randn(300, 2), torch.randn(300, 3), seed=0); "
-            "out = summaries_outside(torch.zeros(1, 3), torch.randn(100, 3)); "
+            "out = summaries_outside(torch.zeros(1, 3), torch.randn(100, 3), torch.randn(10, 3)); "
             "print(out['p_value'], *(name in sys.modules for name in ('torch._dynamo', 'scipy.stats', 'jax')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["[1.0]", "False", "False", "False"]

@@ -88,3 +88,48 @@ def test_probit_conditioning_refuses_a_proposal_in_parameter_units():
     proposal = GaussianPrior(torch.tensor([1.0, 2.0]), torch.tensor([1.0, 1.0]), LOW[:2], HIGH[:2])
     with pytest.raises(ValueError, match="probit-space model cannot correct"):
         condition(fitted.model, torch.randn(3), prior, proposal=proposal, probit=fitted.probit)
+
+
+def test_snpe_a_in_probit_space_matches_the_closed_form():
+    """Round 2 of SNPE-A where the default puts it, in probit space: parameters drawn from a Gaussian proposal
+    in u (a previous posterior mapped back), x = A u + b + noise; the linear model fitted to those draws is
+    the proposal posterior, and conditioning with the proposal's correction gives the closed-form posterior
+    under the N(0, I) prior, for one and for two observations."""
+    torch.set_num_threads(1)
+    prior = BoxUniform(LOW[:2], HIGH[:2])
+    transform = ProbitTransform(prior)
+    sim = LinearGaussian(torch.tensor([[1.0, 0.5], [-0.3, 2.0], [0.7, 0.0]]), torch.tensor([0.1, -0.2, 0.3]),
+                         0.2 * torch.eye(3))
+    proposal_u = GaussianMixture(torch.zeros(1), torch.tensor([[0.4, -0.8]]), torch.tensor([[[0.3, 0.05], [0.05, 0.2]]]))
+    proposal = ProbitPosterior(proposal_u, transform)
+    torch.manual_seed(5)
+    theta = proposal.sample((100_000,))
+    fitted = api.fit_posterior_model("linear", theta, sim.simulate(transform.to_probit(theta), seed=6), prior=prior,
+                                     probit=True)
+    u_true = torch.tensor([[0.5, -1.0]], dtype=torch.float64)
+    for n in (1, 2):
+        xs = sim.simulate(u_true.expand(n, 2), seed=7 + n)
+        post = fitted.posterior(xs, proposal=proposal)
+        mean, cov = sim.posterior(torch.zeros(2), torch.eye(2), xs)
+        assert isinstance(post.inner, GaussianMixture) and post.inner.num_components == 1
+        assert torch.allclose(post.inner.mean, mean, atol=0.02), (n, post.inner.mean, mean)
+        assert torch.allclose(post.inner.covariance, cov, rtol=0.08, atol=2e-3), (n, post.inner.covariance, cov)
+
+
+def test_components_wider_than_the_prior_are_narrowed_to_it_keeping_the_closed_form():
+    """Two observations in probit space divide by the N(0, I) prior once: conditionals of variance 2.5 along a
+    direction (a fitting artefact: no posterior of a Gaussian prior is wider than it) would leave a negative
+    precision; narrowed to the prior there, the product stays a Gaussian, equal to the narrowed product."""
+    from bayessim_exp.inference.bayessim.correction import loewner_min, posterior
+
+    wide = torch.tensor([[[2.5, 0.0], [0.0, 0.04]]], dtype=torch.float64)
+    q = [GaussianMixture(torch.zeros(1), torch.tensor([[m, 0.3]]), wide) for m in (0.2, -0.1)]
+    post = posterior(q, standard_normal_prior(2))
+    assert isinstance(post, GaussianMixture)
+    narrowed = loewner_min(wide, torch.eye(2, dtype=torch.float64))[0]
+    assert torch.allclose(narrowed, torch.diag(torch.tensor([1.0, 0.04], dtype=torch.float64)))
+    # N(m1, S) N(m2, S) / N(0, I) with S = diag(1, 0.04): precision 2 S^-1 - I
+    precision = 2 * torch.linalg.inv(narrowed) - torch.eye(2, dtype=torch.float64)
+    mean = torch.linalg.solve(precision, torch.linalg.inv(narrowed) @ torch.tensor([0.1, 0.6], dtype=torch.float64))
+    assert torch.allclose(post.covariance, torch.linalg.inv(precision), atol=1e-9)
+    assert torch.allclose(post.mean, mean, atol=1e-9)

@@ -48,7 +48,7 @@ def test_a_replay_at_the_recording_parameters_is_the_recording(compose):
     torch.testing.assert_close(out.states, real.states, atol=1e-5, rtol=0)
 
 
-def _check(task, real, posterior_mean, prior):
+def _check(task, real, posterior_mean, prior, summarizer):
     posterior = GaussianMixture(torch.zeros(1), torch.tensor([posterior_mean], dtype=torch.float64),
                                 torch.diag(torch.tensor([0.01, 0.002], dtype=torch.float64)) ** 2 * torch.ones(1, 1, 1))
     pool = _pool(task)
@@ -56,18 +56,42 @@ def _check(task, real, posterior_mean, prior):
     def simulate(theta, which):
         return replay(pool, theta.clamp(prior.low, prior.high), real, which)
 
-    return replayed_check(simulate, real, posterior, prior, num=100, seed=0, alpha=0.01, max_distance_ratio=0.15)
+    return replayed_check(simulate, real, posterior, prior, summarize=summarizer, num=100, seed=0, alpha=0.01,
+                          max_distance_ratio=0.15)
 
 
-def test_the_replayed_check_passes_a_posterior_at_the_truth_and_flags_one_elsewhere(compose):
+def _rotated(traj, angle: float):
+    """The same trajectories with the angle logged `angle` rad off (a log with another zero): no parameter
+    of our pendulum reproduces them, since gravity acts on the true angle."""
+    cos, sin = traj.states[..., 0], traj.states[..., 1]
+    states = traj.states.clone()
+    states[..., 0] = cos * np.cos(angle) - sin * np.sin(angle)
+    states[..., 1] = sin * np.cos(angle) + cos * np.sin(angle)
+    return type(traj)(states, traj.actions, traj.rewards, traj.valid, traj.diverged, traj.dt)
+
+
+def test_the_replayed_check_passes_a_posterior_at_the_truth_and_finds_one_elsewhere_too_narrow(compose):
     cfg = compose([])
     task = registry.build("task", cfg.task)
     prior = registry.build("prior", cfg.prior, spec=task.spec)
+    summarizer = registry.build("summarizer", cfg.summarizer)
     real = _recorded(task, [1.3, 0.6])
-    good = _check(task, real, [1.3, 0.6], prior)
-    assert good.flagged == []
-    assert min(good.p_value) > 0.01
-    assert max(np.divide(good.distance_posterior, good.distance_prior)) < 0.1
-    wrong = _check(task, real, [0.8, 0.45], prior)
-    assert wrong.flagged == [0, 1, 2]
+    good = _check(task, real, [1.3, 0.6], prior, summarizer)
+    assert good.too_narrow == [] and good.flagged == [] and min(good.p_value) > 0.01
+    assert float(good.model_error_covariance.abs().max()) < 1e-3 * float(good.posterior_covariance.abs().max())
+    wrong = _check(task, real, [0.8, 0.45], prior, summarizer)
+    assert wrong.too_narrow == [0, 1, 2]
     assert wrong.record()["p_value"] == pytest.approx([1 / 101] * 3)
+
+
+def test_data_no_parameter_reproduces_are_flagged_and_give_a_model_error(compose):
+    cfg = compose([])
+    task = registry.build("task", cfg.task)
+    prior = registry.build("prior", cfg.prior, spec=task.spec)
+    summarizer = registry.build("summarizer", cfg.summarizer)
+    real = _rotated(_recorded(task, [1.3, 0.6]), 0.3)
+    check = _check(task, real, [1.3, 0.6], prior, summarizer)
+    assert check.flagged == [0, 1, 2], check.record()
+    assert min(check.excess_ratios) > 0.15 and max(check.residual_p_value) <= 0.01
+    # a model error far wider than the posterior: the posterior must widen to hold it
+    assert torch.linalg.eigvalsh(check.model_error_covariance - check.posterior_covariance).max() > 0

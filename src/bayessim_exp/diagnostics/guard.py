@@ -12,7 +12,9 @@ Inputs are what every round measures on its held-out simulations (the last
   is not flagged by chance;
 - the effective sample size of the posterior given the real data, where it is an importance-sampling
   estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points.
-Each finding is a sentence saying what is wrong and what to try.
+Each finding is a sentence saying what is wrong and what to try. Underconfidence is a finding but not a
+failure: a posterior wider than the data allow is still safe to randomize with (the round's action,
+method.on_guard, follows failures only).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import dataclasses
 import math
 
 COVERAGE_TOLERANCE = 0.1
-SAMPLING_Z = 2.33  # one-sided 1 % per band edge
+SAMPLING_Z = 1.645  # one-sided 5 % at a band edge; a calibrated model sits mid-band, far from it
 MIN_EFFECTIVE_SAMPLES = 200
 ACTIONS = ("warn", "fallback", "stop")
 
@@ -29,13 +31,14 @@ ACTIONS = ("warn", "fallback", "stop")
 @dataclasses.dataclass
 class GuardReport:
     warnings: list[str]
+    failed: bool = False  # a finding that makes the posterior unsafe to randomize with (all but underconfidence)
 
     @property
     def ok(self) -> bool:
         return not self.warnings
 
     def to_dict(self) -> dict:
-        return {"ok": self.ok, "warnings": list(self.warnings)}
+        return {"ok": self.ok, "failed": self.failed, "warnings": list(self.warnings)}
 
 
 def coverage_band(level: float, count: int, tolerance: float = COVERAGE_TOLERANCE) -> tuple[float, float]:
@@ -50,8 +53,9 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
     """mean_gain: held-out mean log q - log of `baseline` (the round's proposal; nats); coverage: {level (str
     or float): fraction} of HPD regions on `count` held-out simulations; effective_samples: of an
     importance-sampled posterior (None: closed form). Any may be None (not measured)."""
-    warnings = []
+    warnings, failed = [], False
     if mean_gain is not None and not mean_gain > 0:
+        failed = True
         warnings.append(
             f"the posterior is worse than the {baseline} on held-out simulations (mean log-density gain "
             f"{mean_gain:+.2f} nats): do not randomize with it. Try the probit parameter space if box was set "
@@ -61,6 +65,7 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
     for level, value in (coverage or {}).items():
         low, high = coverage_band(float(level), count, tolerance)
         if value < low:
+            failed = True
             warnings.append(
                 f"overconfident: {value:.0%} of held-out true parameters fall in the {float(level):.0%} credible "
                 f"region (passes from {low:.0%}): the posterior is too narrow. Try an ensemble (model.ensemble=3, "
@@ -72,9 +77,10 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
                 f"region (passes up to {high:.0%}): the posterior is wider than the data allow. Try more "
                 "components, a larger network or more epochs (patience)")
     if effective_samples is not None and effective_samples < MIN_EFFECTIVE_SAMPLES:
+        failed = True
         warnings.append(
             f"the posterior given the real data has no closed form and its importance-sampling estimate rests on "
             f"{effective_samples:.0f} effective draws (< {MIN_EFFECTIVE_SAMPLES}): its density and draws are not "
             "reliable. Try method.proposal=truncated, fewer mixture components (model.components) or a model of "
             "one Gaussian per network (mdnn_projected_gaussian_ensemble)")
-    return GuardReport(warnings)
+    return GuardReport(warnings, failed)

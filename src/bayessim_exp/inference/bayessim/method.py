@@ -260,7 +260,7 @@ class BayesSim(InferenceMethod):
         report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
                                  held_out.get("count", 0), baseline,
                                  ctx.output("condition")["posterior"].effective_sample_size)
-        action = "none" if report.ok else self.cfg.on_guard
+        action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
         handed_on = self._handed_on_round(ctx, r - 1) if action == "fallback" else r
         for warning in report.warnings:
             log.warning("round %d: %s", r, warning)
@@ -300,7 +300,8 @@ class BayesSim(InferenceMethod):
             "proposal": self.proposal_name(ctx),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],
-            "guard": {**{k: guard[k] for k in ("ok", "warnings", "action")}, "handed_on": _round_name(guard["handed_on"])},
+            "guard": {**{k: guard[k] for k in ("ok", "failed", "warnings", "action")},
+                      "handed_on": _round_name(guard["handed_on"])},
             "dispersion": conditioned["dispersion"],
             "temperature": conditioned["temperature"],
             "replay_check": conditioned["replay_check"],

@@ -79,10 +79,11 @@ compile_bytecode() {
 
 stamp() {
     local commit
-    commit=$(git rev-parse --short HEAD 2>/dev/null) || commit=${COMMIT:-unknown (no .git in this copy; set COMMIT)}
+    # COMMIT first: the copy's .git (where there is one) is the session's starting point, not the tree sent
+    commit=${COMMIT:-$(git rev-parse --short HEAD 2>/dev/null || echo "unknown (set COMMIT)")}
     echo "commit: $commit"
     echo "date: $(date -u '+%Y-%m-%d %H:%M:%S UTC')"
-    echo "machine: $(hostname), $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
+    echo "machine: $(hostname), $(nproc) usable of $(grep -c ^processor /proc/cpuinfo) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
     echo "gpu: $(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || echo none)"
     "$PY" - <<'EOF'
 import importlib.metadata as md
@@ -147,7 +148,7 @@ step_humanoid() {
 
 step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with their report
     timeout "${SWEEP_TIMEOUT:-480}" "$PY" -m bayessim_exp --config-dir sweeps --config-name calibration --multirun \
-        device=cuda "hydra.sweeper.params.seed=range(${SEEDS:-100})" hydra/launcher=local \
+        device=cuda "seed=range(${SEEDS:-100})" hydra/launcher=local \
         "hydra.launcher.n_jobs=${JOBS:-6}" hydra.sweep.dir=/tmp/calibration ${CALIBRATION_ARGS:-}
     local rc=$?
     "$PY" -m bayessim_exp.report /tmp/calibration

@@ -29,6 +29,20 @@ def cli(*args, cwd, timeout=600):
 
 
 
+def test_jobs_of_the_local_launcher_finish_with_their_figures(tmp_path):
+    """hydra/launcher=local runs jobs in joblib (loky) workers, whose start method a process they spawn cannot
+    set up: the figures' drawing process must start anyway (every such job used to fail)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    sweep = tmp_path / "sweep"
+    proc = cli("--multirun", "seed=0,1", "debug=smoke", "hydra/launcher=local", f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for job in sorted(sweep.glob("*_seed*")):
+        assert (job / "results.json").is_file() and not (job / "error.txt").exists()
+        events = EventAccumulator(str(job), size_guidance={"images": 0}).Reload()
+        assert len(events.Images("posterior")) == 2, job
+
+
 def test_a_multirun_sweep_and_its_report(tmp_path):
     sweep = tmp_path / "sweep"
     proc = cli("--multirun", "summarizer=start,waypoints", "seed=0,1", "debug=smoke", f"hydra.sweep.dir={sweep}",

@@ -11,10 +11,12 @@ every figure; one that fails is reported and left out, never failing the run.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import io
 import logging
 import multiprocessing
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import numpy as np
@@ -45,19 +47,43 @@ def _png(name: str, *args) -> bytes:
     return out.getvalue()
 
 
+@contextlib.contextmanager
+def _interpreter_start_method():
+    """A process spawned from a joblib worker (hydra/launcher=local) is told to set up the worker's start
+    method, 'loky', which a fresh interpreter does not know: it dies before running anything. The drawing
+    process is started under the interpreter's own default instead."""
+    method = multiprocessing.get_start_method(allow_none=True)
+    if method in (None, *multiprocessing.get_all_start_methods()):
+        yield
+        return
+    multiprocessing.set_start_method(None, force=True)
+    try:
+        yield
+    finally:
+        multiprocessing.set_start_method(method, force=True)
+
+
 class TensorBoardLogger:
     def __init__(self, log_dir: str | Path):
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(log_dir=str(log_dir))
         # spawn: a forked copy of a process that holds CUDA and JAX state is not safe
-        self._drawing = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                                            initializer=_drawing_process_setup)
-        self._drawing.submit(_warm_up)
+        with _interpreter_start_method():  # the process starts at the first submit
+            self._drawing = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                                                initializer=_drawing_process_setup)
+            self._drawing.submit(_warm_up)
         self._pending: list[tuple[str, int, Future]] = []  # figures being drawn, in the order asked for
+        self._broken = False
 
     def _figure(self, tag: str, step: int, name: str, *args) -> None:
-        self._pending.append((tag, step, self._drawing.submit(_png, name, *args)))
+        if self._broken:
+            return
+        try:
+            self._pending.append((tag, step, self._drawing.submit(_png, name, *args)))
+        except BrokenProcessPool as exc:  # the drawing process died: figures are not worth a run
+            self._broken = True
+            log.warning("TensorBoard figures are left out from round %d on: the drawing process ended (%s)", step, exc)
         self._add_drawn()
 
     def _add_drawn(self, wait: bool = False) -> None:

@@ -1,6 +1,6 @@
 """Foreign-dynamics benchmark: the whole pipeline on pendulum logs from simulators nobody here wrote.
 
-    PYTHONPATH=src python benchmarks/foreign_dynamics.py --jobs 14 --out /tmp/foreign     # about 9 min on 16 cores
+    PYTHONPATH=src python benchmarks/foreign_dynamics.py --jobs 14 --device cuda --out /tmp/foreign   # 16 cores, a GPU
     PYTHONPATH=src python benchmarks/foreign_dynamics.py --quick --jobs 2 --out /tmp/foreign_quick
 
 Each case writes n real trajectories (n = 1 and 5) at hidden parameters inside the prior box into an
@@ -122,8 +122,8 @@ def run_case(case: dict) -> dict:
 
 
 def cases(args) -> list[dict]:
-    # CPU processes side by side, one thread each (on a GPU machine too: its 16 cores, not its GPU)
-    overrides = ["sim=native", "device=cpu", *(["rounds=2", "collect.trajectories=2000"] if args.quick else []),
+    # processes side by side simulating on one CPU thread each (a GPU machine's 16 cores); --device cuda fits there
+    overrides = ["sim=native", f"device={args.device}", *(["rounds=2", "collect.trajectories=2000"] if args.quick else []),
                  *args.overrides]
     out = []
     for source in args.sources:
@@ -177,6 +177,7 @@ def main() -> None:
     ap.add_argument("--sine", type=int, default=3, help="sine-excitation cases (different data seeds)")
     ap.add_argument("--quick", action="store_true", help="2 rounds of 2,000 simulations (a try, not the benchmark)")
     ap.add_argument("--overrides", nargs="*", default=[], help="added to every run (e.g. policy=random)")
+    ap.add_argument("--device", default="cpu", help="where the posterior models train (cpu, cuda)")
     args = ap.parse_args()
     todo = cases(args)
     # worker processes that may start their own (each run draws its figures in one)

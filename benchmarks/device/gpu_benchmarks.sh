@@ -19,7 +19,7 @@
 #   calibration  the known-truth calibration study: sweeps/calibration.yaml (Pendulum, $SEEDS seeds, default 100)
 #                with device=cuda, $JOBS runs at once on the GPU (default 6), then its report (tarred into $OUT)
 #   round_coverage  benchmarks/round_coverage.py: every task's default run, seed 0, device=cuda, 3 at once
-#   foreign      benchmarks/foreign_dynamics.py on the CPUs (14 runs at once)
+#   foreign      benchmarks/foreign_dynamics.py, 14 runs at once simulating on the CPUs, fitting on the GPU
 #   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
 #
 # Logs and JSON go to $OUT (./device_out where OUT is unset), one log per step, each headed by the commit, the
@@ -162,7 +162,8 @@ step_round_coverage() {
 }
 
 step_foreign() {
-    "$PY" benchmarks/foreign_dynamics.py --jobs 14 --out /tmp/foreign && cp /tmp/foreign/foreign_dynamics.json "$OUT/"
+    "$PY" benchmarks/foreign_dynamics.py --jobs 14 --device cuda --out /tmp/foreign \
+        && cp /tmp/foreign/foreign_dynamics.json "$OUT/"
 }
 
 step_results() {

@@ -18,7 +18,7 @@
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
 #   calibration  the known-truth calibration study: sweeps/calibration.yaml (Pendulum, $SEEDS seeds, default 100)
 #                with device=cuda, $JOBS runs at once on the GPU (default 6), then its report (tarred into $OUT)
-#   round_coverage  benchmarks/round_coverage.py: every task's default run, seed 0, device=cuda, 3 at once
+#   round_coverage  benchmarks/round_coverage.py: every task's (or $TASKS') default run, seed 0, device=cuda, $JOBS at once
 #   foreign      benchmarks/foreign_dynamics.py, 14 runs at once simulating on the CPUs, fitting on the GPU
 #   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
 #
@@ -158,7 +158,8 @@ step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with t
 }
 
 step_round_coverage() {
-    "$PY" benchmarks/round_coverage.py --jobs 3 --out /tmp/round_coverage --json "$OUT/round_coverage.json" device=cuda
+    "$PY" benchmarks/round_coverage.py --jobs "${JOBS:-4}" --out /tmp/round_coverage --json "$OUT/round_coverage.json" \
+        ${TASKS:+--tasks $TASKS} device=cuda
 }
 
 step_foreign() {

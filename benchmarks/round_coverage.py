@@ -19,7 +19,7 @@ import os
 import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 # the longest runs first, so that parallel jobs end together
@@ -74,7 +74,9 @@ def main() -> None:
           "| gain at truth | run s |\n|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
     outcomes = []
     with ThreadPoolExecutor(args.jobs) as pool:
-        for outcome in pool.map(lambda job: run(*job, args.overrides, args.out), jobs):
+        futures = [pool.submit(run, *job, args.overrides, args.out) for job in jobs]
+        for future in as_completed(futures):  # each run's rows as soon as it ends
+            outcome = future.result()
             outcomes.append(outcome)
             print("\n".join(rows(outcome)), flush=True)
             if args.json:  # after every run: what finished survives a run stopped at its time limit

@@ -159,7 +159,7 @@ step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with t
 
 step_round_coverage() {
     "$PY" benchmarks/round_coverage.py --jobs "${JOBS:-4}" --out /tmp/round_coverage --json "$OUT/round_coverage.json" \
-        ${TASKS:+--tasks $TASKS} device=cuda
+        device=cuda ${TASKS:+--tasks $TASKS}
 }
 
 step_foreign() {

@@ -13,8 +13,8 @@ job runs on one CPU thread (`sim=native device=cpu`), so that a dozen processes 
 `--sections` runs sections in separate calls where one call's time is short.
 
 SECTIONS below is the order of docs/results.md; each section (benchmarks/results_sections.py) declares its jobs
-and renders its markdown, stamped with its commands, the commit (`git rev-parse --short HEAD`, or $COMMIT where
-the copy has no .git), the machine (host, CPU model and cores, GPU) and the UTC date. A section lives between
+and renders its markdown, stamped with its commands, the commit ($COMMIT where
+set, as for a copy sent to another machine, else `git rev-parse --short HEAD`), the machine (host, CPU model and cores, GPU) and the UTC date. A section lives between
 `<!-- section NAME -->` and `<!-- end NAME -->` in the output, which is how --sections keeps the others.
 Runs and logs go to outputs/results/ (quick: outputs/results_quick/), emptied per section at its start.
 """
@@ -46,6 +46,8 @@ BLOCK = re.compile(r"<!-- section (\S+) -->\n(.*?)\n<!-- end \1 -->", re.S)
 
 
 def commit() -> str:
+    if os.environ.get("COMMIT"):  # a copy sent to another machine: its .git, where it has one, is not what was sent
+        return os.environ["COMMIT"]
     try:
         sha = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
                              check=True).stdout.strip()

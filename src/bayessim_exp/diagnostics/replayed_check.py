@@ -162,7 +162,9 @@ def _implied_parameters(z: torch.Tensor, theta: torch.Tensor,
     and B^T B (regularised by a relative 1e-9 so a parameter the summaries ignore stays invertible)."""
     mean_theta, mean_z = theta.mean(0), z.mean(0)
     design = theta - mean_theta
-    B = torch.linalg.lstsq(design, z - mean_z).solution.T  # [F, D]
+    # the normal equations (D unknowns per feature, D <= tens): LAPACK's least squares gave results that
+    # differed in the last digit from run to run
+    B = torch.linalg.solve(design.T @ design, design.T @ (z - mean_z)).T  # [F, D]
     gram = B.T @ B
     gram = gram + 1e-9 * gram.diagonal().mean().clamp_min(1e-300) * torch.eye(len(gram), dtype=gram.dtype)
     offsets = torch.linalg.solve(gram, B.T @ (queries - mean_z).T).T  # [k, D]

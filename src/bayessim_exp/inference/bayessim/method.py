@@ -34,6 +34,7 @@ from .combination import COMBINATIONS
 from .condition import condition
 from .proposals import moment_matched
 from .replay_tempering import temper_to_replays
+from .set_calibration import product_temperature
 
 log = logging.getLogger(__name__)
 
@@ -186,12 +187,13 @@ class BayesSim(InferenceMethod):
         real = real_trajectories(ctx)
         x_real = self._summaries(real)
         spreads = []
+        product_tau, product_record = self._product_temperature(ctx, model, real.num)
 
         def condition_at(temperature: float):
             try:
                 post, spread = condition(model, x_real, self.comp.prior, self.cfg.max_components,
                                          proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
-                                         combination=self.cfg.combination, temperature=temperature)
+                                         combination=self.cfg.combination, temperature=product_tau * temperature)
             except ValueError as exc:
                 raise PosteriorError(f"round {ctx.round}: {exc}") from exc
             spreads.append(spread)
@@ -204,7 +206,7 @@ class BayesSim(InferenceMethod):
             log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
                      ctx.round, self.comp.task.name)
         out = {"x_real": x_real, "temperature": 1.0, "replay_check": None, "unwidened_replay_check": None,
-               "tempering": None}
+               "tempering": None, "product_temperature": product_record}
         if not replayable:
             out["posterior"] = condition_at(1.0)
         else:
@@ -222,7 +224,34 @@ class BayesSim(InferenceMethod):
             out["replay_check"], out["unwidened_replay_check"] = result.record(), first.record()
             ctx.tb.replays(ctx.round, result, list(self.comp.task.obs_names))
         out["dispersion"] = None if spreads[-1] is None else spreads[-1].record()
+        out["temperature"] *= product_tau
         return out
+
+    def _product_temperature(self, ctx: RoundContext, model, n: int) -> tuple[float, dict | None]:
+        """With n > 1 real trajectories: the product's temperature fitted on sets of n simulations at the round's
+        held-out parameters (set_calibration.py); (1, None) for one trajectory or without sets."""
+        count = min(self.comp.rc.diagnostics.combination_sets, len(self._split(ctx.output("summarize"))[2]))
+        if n < 2 or count == 0:
+            return 1.0, None
+        theta = self._split(ctx.output("summarize"))[2][:count].double()
+        seed = stage_seed(ctx.run_seed, ctx.round, "product_temperature")  # its own stream, as the checks'
+        traj = self.comp.sims.rollout(theta.repeat_interleave(n, 0), self.comp.policy(seed, ctx),
+                                      self.comp.rc.collect.horizon, seed)
+        x = self._summaries(traj).double().reshape(count, n, -1)
+        ok = (~traj.diverged.cpu()).reshape(count, n).all(1) & torch.isfinite(x).all(-1).all(-1)
+        theta, x = theta[ok], x[ok]
+
+        def log_density_at(temperature: float) -> torch.Tensor:
+            return torch.cat([condition(model, x_set.float(), self.comp.prior, self.cfg.max_components,
+                                        proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
+                                        combination="product", temperature=temperature)[0].log_prob(t[None])
+                              for x_set, t in zip(x, theta)])
+
+        tau, record = product_temperature(log_density_at)
+        if tau < 1:
+            log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
+                     ctx.round, n, tau, len(theta))
+        return tau, record
 
     def _summaries(self, traj: Trajectories) -> torch.Tensor:
         return self.comp.summarizer(traj.to(self.comp.device)).cpu()
@@ -304,6 +333,7 @@ class BayesSim(InferenceMethod):
                       "handed_on": _round_name(guard["handed_on"])},
             "dispersion": conditioned["dispersion"],
             "temperature": conditioned["temperature"],
+            "product_temperature": conditioned["product_temperature"],
             "replay_check": conditioned["replay_check"],
             **{k: v for k, v in ctx.output("model_check").items() if k != "seconds"},
         }

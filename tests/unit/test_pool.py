@@ -38,3 +38,40 @@ def test_the_last_chunk_runs_padded_in_the_chunk_sized_simulator(compose):
     assert padded.num == 10
     for field in ("states", "actions", "rewards", "valid", "diverged"):
         torch.testing.assert_close(getattr(padded, field), getattr(exact, field))
+
+
+def test_a_replay_plan_drives_each_simulation_like_its_recorded_trajectory_across_padded_chunks(compose):
+    """policy=replay without noise, at the recording's parameters: every one of 10 simulations (chunks of 4, the
+    last padded as on MJX) is exactly the recorded trajectory it drew; with noise the actions differ, in range."""
+    from bayessim_exp.policies import RandomPolicy, ReplayPolicy, ReplayPolicyConfig
+
+    task = registry.build("task", compose(["task=Pendulum"]).task)
+    params = np.array([[1.3, 0.6]] * 3)
+    recorded = NativeSimulator(task, 3, CONFIG).rollout(params, RandomPolicy(1, 5), 15, seed=5)
+    pool = SimulatorPool(lambda t, n: CompilingNative(t, n, CONFIG), task, chunk=4)
+    exact = ReplayPolicy(ReplayPolicyConfig(action_noise=0.0), recorded, task, seed=0)
+    which = torch.randint(3, (10,), generator=torch.Generator().manual_seed(0))  # the plan's draw, same seed
+    traj = pool.rollout(np.array([[1.3, 0.6]] * 10), exact, horizon=15, seed=1)
+    torch.testing.assert_close(traj.actions, recorded.actions[which])
+    torch.testing.assert_close(traj.states, recorded.states[which], atol=1e-5, rtol=0)
+    noisy = pool.rollout(np.array([[1.3, 0.6]] * 10), ReplayPolicy(ReplayPolicyConfig(action_noise=0.5), recorded, task,
+                                                                    seed=0), horizon=15, seed=1)
+    assert not torch.allclose(noisy.actions, recorded.actions[which]) and noisy.actions.abs().max() <= 1.0
+
+
+def test_replay_without_recorded_trajectories_says_what_it_needs(compose):
+    import pytest
+
+    from bayessim_exp.errors import ConfigError
+    from bayessim_exp.policies import ReplayPolicy, ReplayPolicyConfig
+
+    task = registry.build("task", compose(["task=Pendulum"]).task)
+    with pytest.raises(ConfigError, match="policy=replay replays recorded real trajectories.*real=file"):
+        SimulatorPool(lambda t, n: NativeSimulator(t, n, CONFIG), task, chunk=4).rollout(
+            np.array([[1.3, 0.6]]), ReplayPolicy(ReplayPolicyConfig(0.0), None, task, seed=0), horizon=5, seed=0)
+
+
+def test_real_data_from_a_file_replay_by_default_and_the_command_line_wins(compose):
+    assert compose(["real=file", "real.path=x.npz"]).policy.name == "replay"
+    assert compose(["real=file", "real.path=x.npz", "policy=random"]).policy.name == "random"
+    assert compose([]).policy.name == "random"

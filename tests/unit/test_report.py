@@ -110,3 +110,66 @@ def test_interval():
     mean, lo, hi = interval([1.0, 2.0, 3.0, None])
     assert mean == 2.0 and hi - mean == pytest.approx(4.302653 * 1.0 / 3 ** 0.5)
     assert interval([0.9, 1.0], bounds=(0.0, 1.0))[2] == 1.0
+
+
+def test_a_job_with_a_null_gain_is_counted_and_named_not_averaged_away(tmp_path):
+    """Three seeds, one of whose posteriors put zero density at the truth (results.json writes null): the mean
+    is over the other two, says n = 2, and report.md and summary.csv name the job."""
+    sweep = tmp_path / "sweep"
+    for seed, gain in enumerate([1.0, None, 3.0]):
+        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}"], result=results(seed, [0.5, gain]))
+    build_report(sweep, posteriors=False)
+    with (sweep / "report" / "summary.csv").open() as f:
+        row = next(csv.DictReader(f))
+    assert (row["finished"], row["log_prob_gain_mean"], row["log_prob_gain_n"]) == ("3", "2", "2")
+    assert row["std_ratio_n"] == "3" and row["missing values"] == "log_prob_gain: 1_s1"
+    markdown = (sweep / "report" / "report.md").read_text()
+    assert "| all | 3 | 2 [-10.7, 14.7] (n = 2) |" in markdown
+    assert "`all`, `log_prob_gain`: `1_s1`: **the final posterior put zero density at the truth**" in markdown
+
+
+def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False):
+    """A known-truth job: one round record per HPD level of the truth."""
+    out = results(seed, [gain] * len(levels))
+    for record, level in zip(out["rounds"], levels):
+        record["truth"] = {"hpd_level": level, "marginal_rank": dict(zip(["a", "b"], ranks))}
+        record["guard"] = {"ok": not guard_failed, "failed": guard_failed, "warnings": [],
+                           "action": "fallback" if guard_failed else "none"}
+        record["mismatch"] = {"flagged": flagged}
+    return out
+
+
+def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_path):
+    """100 truths at HPD levels 0.005, 0.015, ..., 0.995 (a calibrated pipeline's levels, evenly): 50 inside the
+    50 % region and 90 inside the 90 % one, with their Clopper-Pearson intervals; round 1 at level 0.95 for all,
+    none inside; one null level (zero density) counted as outside; guard and mismatch counts."""
+    from scipy.stats import beta
+
+    sweep = tmp_path / "sweep"
+    for k in range(100):
+        level = None if k == 0 else (k + 0.5) / 100
+        make_job(sweep, f"{k}_s{k}", [f"seed={k}"], result=truth_results(
+            k, [0.95, level], [(k + 0.5) / 100, 0.5], gain=None if k == 0 else 1.0,
+            guard_failed=k < 3, flagged=k == 7))
+    make_job(sweep, "100_s100", ["seed=100"], result=results(100, [1.0, 1.0]))  # no truth recorded: left out
+    build_report(sweep, posteriors=False)
+    with (sweep / "report" / "calibration.csv").open() as f:
+        row = next(csv.DictReader(f))
+    # levels 0.015 .. 0.495 are below 0.5 (49 of them), 0.015 .. 0.895 below 0.9 (89); the null one is outside
+    assert (row["truths"], row["inside_0.5"], row["inside_0.9"], row["rounds_of_0.9"]) == ("100", "49", "89", "100")
+    assert float(row["ci_low_0.9"]) == pytest.approx(beta.ppf(0.025, 89, 12), abs=1e-4)
+    assert float(row["ci_high_0.9"]) == pytest.approx(beta.ppf(0.975, 90, 11), abs=1e-4)
+    assert (row["zero_density"], row["gain_above_zero"], row["guard_failed_final"], row["fallback_final"],
+            row["flagged_final"], row["flagged_any"]) == ("1", "99", "3", "3", "1", "1")
+    markdown = (sweep / "report" / "report.md").read_text()
+    assert "100 truths (1 finished jobs without a known truth left out)" in markdown
+    assert "| 1 | 0/100 = 0.00 [0.00, 0.04] | 0/100 = 0.00 [0.00, 0.04] |" in markdown
+    assert "90% region 89/100 = 0.89 [0.81, 0.94]" in markdown
+    assert "**1 final posterior(s) put zero density at the truth**" in markdown
+    assert (sweep / "report" / "sbc_ranks_00.png").stat().st_size > 1000
+
+
+def test_a_sweep_without_known_truths_has_no_calibration_section(sweep):
+    build_report(sweep, posteriors=False)
+    assert "Calibration" not in (sweep / "report" / "report.md").read_text()
+    assert not (sweep / "report" / "calibration.csv").exists()

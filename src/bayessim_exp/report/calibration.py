@@ -1,0 +1,165 @@
+"""The report's calibration section: where the truth lies in the final posterior, over the jobs of a
+known-truth study (sweeps/calibration.yaml: each seed's surrogate parameters drawn from the prior).
+
+Read from each round record's `truth` (diagnostics/scoring.py): `hpd_level`, the share of posterior draws
+denser than the truth (inside the level-L region iff below L; null, zero density, counts as outside), and
+`marginal_rank` per parameter (an SBC rank over the number of draws: uniform over truths drawn from the
+prior when the pipeline is calibrated). Per configuration: the share of truths inside the 50 % and 90 %
+regions with a Clopper-Pearson 95 % interval, per round; the gain at the truth (quartiles, share above zero,
+count of zero densities); how often the guard failed or handed on another distribution and how often the
+mismatch flag fired, in the final round and in any round; and one PNG of SBC rank histograms per parameter
+of the final round, each with the binomial 99 % band of a uniform histogram.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from .jobs import Job
+
+LEVELS = (0.5, 0.9)
+BINS = 10
+MAX_PARAMETERS = 16  # histograms drawn per configuration; the others are counted in the figure's title
+CONFIDENCE = 0.95
+
+
+@dataclasses.dataclass
+class Calibration:
+    jobs: int  # finished jobs that know their truth
+    left_out: int  # finished jobs without a truth (a fixed or unknown one)
+    inside: dict[float, list[tuple[int, int]]]  # level -> per round (truths inside, jobs with that round)
+    gains: list[float | None]  # final round's gain at the truth
+    guard_failed_final: int
+    guard_failed_any: int
+    handed_on_other: int  # final rounds whose guard handed on another distribution (fallback)
+    flagged_final: int
+    flagged_any: int
+    ranks: dict[str, list[float]]  # parameter -> final round's marginal ranks
+
+
+def clopper_pearson(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float]:
+    """The exact binomial interval of a share k / n."""
+    alpha = 1 - confidence
+    low = 0.0 if k == 0 else float(stats.beta.ppf(alpha / 2, k, n - k + 1))
+    high = 1.0 if k == n else float(stats.beta.ppf(1 - alpha / 2, k + 1, n - k))
+    return low, high
+
+
+def calibration(jobs: list[Job]) -> Calibration | None:
+    """The section's numbers over finished jobs whose rounds carry `truth`; None when none does."""
+    known = [j for j in jobs if j.results and j.results["rounds"] and j.results["rounds"][-1].get("truth")]
+    if not known:
+        return None
+    rounds = max(len(j.results["rounds"]) for j in known)
+    inside: dict[float, list[tuple[int, int]]] = {level: [] for level in LEVELS}
+    for r in range(rounds):
+        levels = [j.results["rounds"][r]["truth"]["hpd_level"] for j in known
+                  if len(j.results["rounds"]) > r and j.results["rounds"][r].get("truth")]
+        for level in LEVELS:
+            inside[level].append((sum(v is not None and v < level for v in levels), len(levels)))
+    finals = [j.results["rounds"][-1] for j in known]
+    ranks: dict[str, list[float]] = {}
+    for final in finals:
+        for name, value in final["truth"]["marginal_rank"].items():
+            ranks.setdefault(name, []).append(value)
+
+    def guard_failed(record: dict) -> bool:
+        guard = record.get("guard") or {}
+        return bool(guard.get("failed", not guard.get("ok", True)))
+
+    def flagged(record: dict) -> bool:
+        return bool((record.get("mismatch") or {}).get("flagged"))
+
+    return Calibration(
+        jobs=len(known), left_out=sum(1 for j in jobs if j.results) - len(known), inside=inside,
+        gains=[f.get("log_prob_gain") for f in finals],
+        guard_failed_final=sum(guard_failed(f) for f in finals),
+        guard_failed_any=sum(any(guard_failed(r) for r in j.results["rounds"]) for j in known),
+        handed_on_other=sum((f.get("guard") or {}).get("action") == "fallback" for f in finals),
+        flagged_final=sum(flagged(f) for f in finals),
+        flagged_any=sum(any(flagged(r) for r in j.results["rounds"]) for j in known), ranks=ranks)
+
+
+def _share(k: int, n: int) -> str:
+    low, high = clopper_pearson(k, n)
+    return f"{k}/{n} = {k / n:.2f} [{low:.2f}, {high:.2f}]"
+
+
+def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
+    gains = [g for g in c.gains if g is not None and math.isfinite(g)]
+    zero = len(c.gains) - len(gains)
+    quartiles = np.percentile(gains, [25, 50, 75]) if gains else [math.nan] * 3
+    final = {level: c.inside[level][-1] for level in LEVELS}
+    lines = [f"### `{config}`", "",
+             f"{c.jobs} truths" + (f" ({c.left_out} finished jobs without a known truth left out)" if c.left_out else "")
+             + ". Share of truths inside the final posterior's highest-density regions (Clopper-Pearson "
+             f"{CONFIDENCE:.0%} interval): " + "; ".join(f"{level:.0%} region {_share(*final[level])}"
+                                                           for level in LEVELS) + ".", "",
+             "| round | " + " | ".join(f"inside {level:.0%} region" for level in LEVELS) + " |",
+             "|---|" + "---|" * len(LEVELS)]
+    for r in range(len(c.inside[LEVELS[0]])):
+        lines.append(f"| {r + 1} | " + " | ".join(_share(*c.inside[level][r]) for level in LEVELS) + " |")
+    lines += ["",
+              f"Log-density gain at the truth, final round: quartiles {quartiles[0]:+.2f} / {quartiles[1]:+.2f} / "
+              f"{quartiles[2]:+.2f} nats; above zero for {sum(g > 0 for g in gains)} of {len(c.gains)}"
+              + (f"; **{zero} final posterior(s) put zero density at the truth**" if zero else "") + ".",
+              f"Guard failed: final round {c.guard_failed_final} of {c.jobs}, any round {c.guard_failed_any}; "
+              f"the final round handed on another distribution (fallback) in {c.handed_on_other}. "
+              f"Mismatch flagged: final round {c.flagged_final} of {c.jobs}, any round {c.flagged_any}."]
+    if figure is not None:
+        lines += ["", f"![SBC ranks of `{config}`]({figure.name})"]
+    return lines + [""]
+
+
+def csv_row(config: str, c: Calibration) -> list:
+    row: list = [config, c.jobs]
+    for level in LEVELS:
+        k, n = c.inside[level][-1]
+        row += [k, n, f"{k / n:.4f}", *(f"{v:.4f}" for v in clopper_pearson(k, n))]
+    gains = [g for g in c.gains if g is not None and math.isfinite(g)]
+    row += [sum(g > 0 for g in gains), len(c.gains) - len(gains), c.guard_failed_final, c.guard_failed_any,
+            c.handed_on_other, c.flagged_final, c.flagged_any]
+    return row
+
+
+CSV_HEADER = ["configuration", "truths",
+              *(f"{name}_{level:g}" for level in LEVELS for name in ("inside", "rounds_of", "share", "ci_low", "ci_high")),
+              "gain_above_zero", "zero_density", "guard_failed_final", "guard_failed_any", "fallback_final",
+              "flagged_final", "flagged_any"]
+
+
+def rank_figure(c: Calibration, title: str, path: Path) -> Path:
+    """One histogram of the final round's marginal ranks per parameter, with the grey 99 % band a uniform
+    histogram of as many ranks stays in, bin by bin."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(c.ranks)[:MAX_PARAMETERS]
+    cols = min(4, len(names))
+    rows = math.ceil(len(names) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.0 * cols, 2.4 * rows), squeeze=False)
+    for ax, name in zip(axes.flat, names):
+        values = np.asarray(c.ranks[name])
+        counts, edges = np.histogram(values, bins=BINS, range=(0.0, 1.0))
+        low, high = stats.binom.ppf([0.005, 0.995], len(values), 1 / BINS)
+        ax.axhspan(low, high, color="0.85")
+        ax.axhline(len(values) / BINS, color="0.5", lw=1)
+        ax.bar(edges[:-1], counts, width=1 / BINS, align="edge", color="C0", edgecolor="white")
+        ax.set_title(name, fontsize=9)
+        ax.set_xlim(0, 1)
+    for ax in list(axes.flat)[len(names):]:
+        ax.axis("off")
+    more = len(c.ranks) - len(names)
+    fig.suptitle(f"{title}: SBC ranks of the truth, final round ({c.jobs} truths)"
+                 + (f"; {more} more parameter(s) not shown" if more else ""), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

@@ -4,17 +4,17 @@
     python benchmarks/results.py --quick --jobs 2     # tiny budgets into outputs/results_quick/ (never docs/)
     python benchmarks/results.py --sections methods   # only these sections; the others keep their current text
 
-The full mode on a 16-core machine (the lent GPU machine's CPUs: benchmarks/device/README.md) is estimated at
-about 5 minutes with --jobs 14, not measured as a whole: its 16 jobs fit beside each other, and the longest,
-a seed of the PPO comparison (two BayesSim rounds, three PPO runs of 150,000 steps) and a Cartpole BayesSim run,
-take 3-5 minutes each on one core (from the recorded timings: docs/results.md's earlier runs, docs/benchmarks.md's
-PPO throughput, one round of Cartpole at 10,000 simulations in 35 s on the 2-core development machine). Every
-job runs on one CPU thread (`sim=native device=cpu`), so that a dozen processes do not share the GPU.
-`--sections` runs sections in separate calls where one call's time is short.
+Measured on the lent H100 machine's 16 cores (2026-11-23): the methods and PPO sections' 16 jobs, 15 at a time,
+in 144 s (the longest, a PPO seed, 144 s; docs/results.md stamps each); the foreign-dynamics section (59 whole
+runs in its own pool) took 282 s with its fits on the GPU (`--device cuda`) and is estimated at two to three
+times that with CPU fits, its default here. Every methods and PPO job runs on one CPU thread (`sim=native
+device=cpu`), so that a dozen processes do not share the GPU. `--sections` runs sections in separate calls
+where one call's time is short.
 
 SECTIONS below is the order of docs/results.md; each section (benchmarks/results_sections.py) declares its jobs
-and renders its markdown, stamped with its commands, the commit ($COMMIT where
-set, as for a copy sent to another machine, else `git rev-parse --short HEAD`), the machine (host, CPU model and cores, GPU) and the UTC date. A section lives between
+and renders its markdown, stamped with its commands, the commit ($COMMIT where set, as for a copy sent to
+another machine, else `git rev-parse --short HEAD`), the machine (host, CPU model and cores, GPU) and the UTC
+date. A section lives between
 `<!-- section NAME -->` and `<!-- end NAME -->` in the output, which is how --sections keeps the others.
 Runs and logs go to outputs/results/ (quick: outputs/results_quick/), emptied per section at its start.
 """
@@ -33,13 +33,14 @@ from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
 
-from results_sections import ROOT, TEMPLATES, Context, Job, MethodsSection, RlSection, StaticSection
+from results_sections import ROOT, TEMPLATES, Context, Job, MethodsSection, RlSection, ScriptSection
 
 SECTIONS = [
     MethodsSection(),
-    # the lead replaces this with ScriptSection("foreign_dynamics", "benchmarks/foreign_dynamics.py", args=(...),
-    # quick_args=(...)) and its template goes: a script prints its section to stdout
-    StaticSection("real_data"),
+    # its own process pool of 12 runs (one thread each; `--device cuda` fits on a GPU where there is one)
+    ScriptSection("foreign_dynamics", "benchmarks/foreign_dynamics.py", args=("--section", "--jobs", "12"),
+                  quick_args=("--section", "--quick", "--jobs", "2", "--sources", "ours", "--settings", "1",
+                              "--sine", "0"), cost=600.0),
     RlSection(),
 ]
 BLOCK = re.compile(r"<!-- section (\S+) -->\n(.*?)\n<!-- end \1 -->", re.S)

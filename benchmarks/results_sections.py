@@ -2,9 +2,8 @@
 experiment runs and renders its markdown from their outputs. Prose that quotes no number lives in
 benchmarks/results_templates/<name>.md; every sentence with a number is written here from the measured values.
 
-A section has `name`, `jobs(ctx) -> [Job]` and `render(ctx, stamp) -> markdown`. Besides the built-in ones:
-  ScriptSection(name, script, args, quick_args)  a script that prints its section (heading first) to stdout
-  StaticSection(name)                            the template's text as it stands (measured elsewhere)
+A section has `name`, `jobs(ctx) -> [Job]` and `render(ctx, stamp) -> markdown`. Besides the built-in ones,
+ScriptSection(name, script, args, quick_args) is a script that prints its section (heading first) to stdout.
 """
 
 from __future__ import annotations
@@ -275,19 +274,6 @@ class ScriptSection:
         if lines[0].startswith("#"):
             return "\n".join([lines[0], "", command, *lines[1:]])
         return "\n".join([command, "", *lines])
-
-
-@dataclasses.dataclass
-class StaticSection:
-    """The template's text as it stands: measured elsewhere, with its own command and date."""
-
-    name: str
-
-    def jobs(self, ctx: Context) -> list[Job]:
-        return []
-
-    def render(self, ctx: Context, stamp: str) -> str:
-        return (TEMPLATES / f"{self.name}.md").read_text()
 
 
 def _sweep_values(value: str) -> list:

@@ -14,7 +14,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import results  # noqa: E402  benchmarks/results.py
-from results_sections import Context, MethodsSection, RlSection, ScriptSection, StaticSection  # noqa: E402
+from results_sections import Context, MethodsSection, RlSection, ScriptSection  # noqa: E402
 
 
 def test_the_committed_page_is_what_the_assembler_writes_from_it():
@@ -94,7 +94,6 @@ def test_a_script_section_is_its_scripts_stdout_under_the_stamp_and_a_failing_on
     assert seconds["bad"] is None and "no data" in capsys.readouterr().out
     assert good.render(ctx, "STAMP").splitlines() == [
         "## Foreign dynamics", "", f"`python {script} --tiny`: STAMP", "", "A table."]
-    assert StaticSection("real_data").render(ctx, "STAMP").startswith("## Real data from an independent pendulum")
 
 
 def test_quick_mode_refuses_to_write_into_docs(monkeypatch):

@@ -6,8 +6,11 @@ import types
 import pytest
 import torch
 
-from bayessim_exp.inference.bayessim.replay_tempering import (TEMPERATURE_FLOOR, model_error_temperature,
-                                                               temper_to_replays)
+from bayessim_exp.inference.bayessim.replay_tempering import (
+    TEMPERATURE_FLOOR,
+    model_error_temperature,
+    temper_to_replays,
+)
 
 
 def _check(posterior_var, error_var, p_value=0.5):

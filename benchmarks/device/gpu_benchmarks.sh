@@ -18,7 +18,8 @@
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
 #   calibration  the known-truth calibration study: sweeps/calibration.yaml (Pendulum, $SEEDS seeds, default 100)
 #                with device=cuda, $JOBS runs at once on the GPU (default 6), then its report (tarred into $OUT)
-#   round_coverage  benchmarks/round_coverage.py: every task's (or $TASKS') default run, seed 0, device=cuda, $JOBS at once
+#   round_coverage  benchmarks/round_coverage.py: every task's (or $TASKS') default run, seed 0 (or $ROUND_SEEDS),
+#                device=cuda and $ROUND_ARGS (e.g. sim=native), $JOBS at once
 #   foreign      benchmarks/foreign_dynamics.py, 14 runs at once simulating on the CPUs, fitting on the GPU
 #   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
 #
@@ -159,7 +160,7 @@ step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with t
 
 step_round_coverage() {
     "$PY" benchmarks/round_coverage.py --jobs "${JOBS:-4}" --out /tmp/round_coverage --json "$OUT/round_coverage.json" \
-        device=cuda ${TASKS:+--tasks $TASKS}
+        ${TASKS:+--tasks $TASKS} ${ROUND_SEEDS:+--seeds $ROUND_SEEDS} -- device=cuda ${ROUND_ARGS:-}
 }
 
 step_foreign() {

@@ -1,12 +1,14 @@
-"""The product's temperature fitted on simulated sets: 1 where the per-trajectory posteriors are exact,
+"""The product's temperature fitted on simulated sets: about 1 where the per-trajectory posteriors are exact,
 below 1 where they are too narrow, against a linear-Gaussian model whose posteriors are known."""
 
+import pytest
 import torch
 
+from bayessim_exp.diagnostics.scoring import hpd_level
 from bayessim_exp.distributions.independent import GaussianPrior
 from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.inference.bayessim.correction import posterior
-from bayessim_exp.inference.bayessim.set_calibration import product_temperature
+from bayessim_exp.inference.bayessim.set_calibration import miscalibration, product_temperature
 
 NOISE = 0.5  # x = theta + N(0, NOISE^2) in one dimension, theta ~ N(0, 1)
 PRIOR = GaussianPrior(torch.zeros(1, dtype=torch.float64), torch.ones(1, dtype=torch.float64))
@@ -27,24 +29,43 @@ def _single(x: torch.Tensor, squeeze: float) -> GaussianMixture:
 def _fitted(squeeze: float, n: int = 3) -> float:
     theta, x = _sets(400, n, seed=0)
 
-    def log_density_at(tau: float) -> torch.Tensor:
-        return torch.cat([posterior([_single(xi, squeeze) for xi in xs], PRIOR, temperature=tau).log_prob(t[None])
-                          for xs, t in zip(x, theta)])
+    def levels_at(tau: float) -> torch.Tensor:
+        g = torch.Generator().manual_seed(1)
+        levels = []
+        for xs, t in zip(x, theta):
+            post = posterior([_single(xi, squeeze) for xi in xs], PRIOR, temperature=tau)
+            levels.append(hpd_level(post, t[None], post.sample((500,), generator=g).double(), g))
+        return torch.tensor(levels)
 
-    return product_temperature(log_density_at)[0]
+    return product_temperature(levels_at, (0.5, 0.9))[0]
 
 
-def test_exact_per_trajectory_posteriors_keep_the_plain_product():
-    assert _fitted(squeeze=1.0) == 1.0
+def test_exact_per_trajectory_posteriors_keep_about_the_plain_product():
+    """400 sets: a share's standard error is 0.025 at 50 %, so the fitted tau stays within an eighth of a doubling."""
+    assert _fitted(squeeze=1.0) >= 2 ** (-1 / 8)
 
 
-def test_per_trajectory_posteriors_too_narrow_widen_the_product():
-    """Variances at a third of the exact ones: the product of three is about three times too narrow."""
+def test_per_trajectory_posteriors_too_narrow_widen_the_product_to_the_calibrated_temperature():
+    """Variances at a third of the exact ones (precision 15 instead of 5): each q_i / p has precision 14 and mean
+    (12/14) x_i, so the tempered posterior of three has precision 1 + 42 tau and mean c xbar, c = 36 tau / (1 + 42
+    tau). Its error theta - c xbar has variance (1 - c)^2 + c^2 / 12 (xbar's noise NOISE^2 / 3); calibrated where
+    that equals the posterior's 1 / (1 + 42 tau): tau = 0.21 (0.286 would only fix the precision). 400 sets: within
+    a quarter of a doubling."""
     tau = _fitted(squeeze=1 / 3)
-    assert 0.25 <= tau <= 0.5, tau
+    assert 2 ** (-2.5) <= tau <= 2 ** (-2.0), tau
 
 
-def test_the_record_holds_each_temperature_tried():
-    tau, record = product_temperature(lambda t: torch.tensor([-abs(t - 0.5)], dtype=torch.float64))
-    assert tau == 0.5 and record["sets"] == 1 and record["mean_log_density"]["0.5"] == 0.0
-    assert len(record["mean_log_density"]) == 9
+def test_miscalibration_counts_each_level_in_its_standard_errors():
+    levels = torch.tensor([0.1, 0.3, 0.6, 0.95])  # shares inside: 0.5 at 50 %, 0.75 at 90 %
+    assert miscalibration(levels, (0.5,)) == 0.0
+    assert miscalibration(levels, (0.9,)) == pytest.approx(0.15**2 / (0.9 * 0.1 / 4))
+
+
+def test_the_record_holds_each_temperature_tried_and_ties_go_to_the_narrower():
+    def levels_at(tau: float) -> torch.Tensor:  # calibrated at every tau <= 0.5
+        return torch.tensor([0.25, 0.75]) if tau <= 0.5 else torch.tensor([0.95, 0.95])
+
+    tau, record = product_temperature(levels_at, (0.5,))
+    assert tau == 0.5 and record["sets"] == 2 and record["inside"]["0.5"] == {"0.5": 0.5}
+    assert record["inside"]["1"] == {"0.5": 0.0}
+    assert len(record["inside"]) == 5 + 6  # the coarse grid down to two steps past 0.5, then eighths on both sides

@@ -27,20 +27,27 @@ def _finite_or_none(value: float) -> float | None:
 TRUTH_DRAWS = 4000  # posterior draws the truth is ranked among (a share's standard error <= 0.008)
 
 
+def hpd_level(posterior: ParameterDistribution, theta: torch.Tensor, draws: torch.Tensor,
+              generator: torch.Generator) -> float | None:
+    """The share of `draws` (from posterior) denser than theta [1, D]: theta lies in the level-L HPD region iff
+    it is below L; None where theta has no density. Draws as dense as theta (a flat distribution: the prior
+    handed on by the guard) count by a uniform share of them, so a flat distribution's level is uniform."""
+    at_theta = float(posterior.log_prob(theta))
+    if not math.isfinite(at_theta):
+        return None
+    lp = posterior.log_prob(draws)
+    ties = float((lp == at_theta).double().mean())
+    return float((lp > at_theta).double().mean()) + float(torch.rand(1, generator=generator, dtype=torch.float64)) * ties
+
+
 def truth_rank(posterior: ParameterDistribution, names: list[str], true: np.ndarray, seed: int) -> dict:
-    """{"hpd_level": share of draws denser than theta* (None at zero density), "marginal_rank": {name: share
-    of draws below theta*_d}}. Draws as dense as theta* (a flat distribution: the prior handed on by the
-    guard) count by a uniform share of them, so a flat distribution's level is uniform, as it should be."""
+    """{"hpd_level": hpd_level of theta* among TRUTH_DRAWS draws, "marginal_rank": {name: share of draws
+    below theta*_d}}."""
     t = torch.as_tensor(true, dtype=torch.float64)[None]
     g = torch.Generator().manual_seed(seed)
     draws = posterior.sample((TRUTH_DRAWS,), generator=g).double()
-    at_truth = float(posterior.log_prob(t))
-    level = None
-    if math.isfinite(at_truth):
-        lp = posterior.log_prob(draws)
-        ties = float((lp == at_truth).double().mean())
-        level = float((lp > at_truth).double().mean()) + float(torch.rand(1, generator=g, dtype=torch.float64)) * ties
-    return {"hpd_level": level, "marginal_rank": dict(zip(names, (draws < t).double().mean(0).tolist()))}
+    return {"hpd_level": hpd_level(posterior, t, draws, g),
+            "marginal_rank": dict(zip(names, (draws < t).double().mean(0).tolist()))}
 
 
 def score(posterior: ParameterDistribution, prior: ParameterDistribution, names: list[str],

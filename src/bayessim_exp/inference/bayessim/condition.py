@@ -30,7 +30,15 @@ def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components:
     probit: the transform the model's parameters were fitted in, or None for parameter units.
     """
     x_obs = x_obs.reshape(-1, x_obs.shape[-1])
-    conditionals = [model.conditional(x) for x in x_obs]
+    return combine_conditionals([model.conditional(x) for x in x_obs], prior, max_components, proposal, seed, probit,
+                                combination, temperature)
+
+
+def combine_conditionals(conditionals: list, prior, max_components: int = 50, proposal=None, seed: int = 0,
+                         probit: ProbitTransform | None = None, combination: str = "dispersion",
+                         temperature: float = 1.0) -> tuple[ParameterDistribution, Dispersion | None]:
+    """`condition` from the model's per-trajectory posteriors q(theta | x_i), for callers that combine the
+    same ones at several temperatures."""
     if probit is None:
         return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed,
                        temperature=temperature)

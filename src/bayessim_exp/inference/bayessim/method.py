@@ -22,6 +22,7 @@ from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
 from ...diagnostics.replayed_check import replayed_check
+from ...diagnostics.scoring import hpd_level
 from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
@@ -31,7 +32,7 @@ from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, real_trajectories
 from .combination import COMBINATIONS
-from .condition import condition
+from .condition import combine_conditionals, condition
 from .proposals import moment_matched
 from .replay_tempering import temper_to_replays
 from .set_calibration import product_temperature
@@ -241,13 +242,20 @@ class BayesSim(InferenceMethod):
         ok = (~traj.diverged.cpu()).reshape(count, n).all(1) & torch.isfinite(x).all(-1).all(-1)
         theta, x = theta[ok], x[ok]
 
-        def log_density_at(temperature: float) -> torch.Tensor:
-            return torch.cat([condition(model, x_set.float(), self.comp.prior, self.cfg.max_components,
-                                        proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
-                                        combination="product", temperature=temperature)[0].log_prob(t[None])
-                              for x_set, t in zip(x, theta)])
+        draws = self.comp.rc.diagnostics.coverage_samples
+        conditionals = [[model.conditional(x_i.float()) for x_i in x_set] for x_set in x]
 
-        tau, record = product_temperature(log_density_at)
+        def levels_at(temperature: float) -> torch.Tensor:
+            generator = torch.Generator().manual_seed(seed)  # the same draws' stream at every temperature
+            levels = []
+            for q, t in zip(conditionals, theta):
+                post = combine_conditionals(q, self.comp.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
+                                            self.probit, "product", temperature)[0]
+                level = hpd_level(post, t[None], post.sample((draws,), generator=generator).double(), generator)
+                levels.append(1.0 if level is None else level)
+            return torch.tensor(levels, dtype=torch.float64)
+
+        tau, record = product_temperature(levels_at, self.comp.rc.diagnostics.levels)
         if tau < 1:
             log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
                      ctx.round, n, tau, len(theta))

@@ -7,32 +7,56 @@ that miss the parameters' correlations, or a width slightly off in every factor,
 Measured on Cartpole (13 parameters, 50 truths drawn from the prior, docs/statistics.md): the final
 posterior held the truth in its 90 % region for 0.90 of the truths after round 1 and 0.28 after round 3.
 
-The remedy is temperature scaling for the product, fitted where its error shows: sets of n trajectories
-simulated at one parameter value each (the round's held-out draws from its proposal), each set conditioned
-exactly as the real set is, at temperatures TEMPERATURES (the likelihood ratios raised to tau), and the
-tau with the highest mean log density of the sets' own parameters is kept: a proper scoring rule, so tau
-stays 1 where the product is right, and it only ever widens (tau <= 1).
+The remedy is a temperature for the product, fitted where its error shows: sets of n trajectories simulated at
+one parameter value each (the round's held-out draws from its proposal), each set conditioned exactly as the
+real set is at temperatures tau (the likelihood ratios raised to tau), and the tau kept whose sets hold their
+own parameters inside their level-L HPD regions closest to the share L, at every reported level L (the sum of
+squared deviations in standard errors). It only ever widens (tau <= 1).
+
+Why coverage and not the mean log density (a proper score): the products' errors are heavier-tailed than
+one temperature can follow, so the best log score widens the core to reach the tails. On Pendulum's sets
+it chose tau = 0.71, where the 50 % regions held 0.63 of the sets (and the calibration study 0.62 of its
+truths); tau = 1 held 0.51 and 0.85 at 90 %. Matching both levels lands in between.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import torch
 
-TEMPERATURES = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
-_FLOOR = -1e3  # a set whose posterior puts (numerically) no density at its parameters counts as this
+COARSE = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
+_FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the best coarse one
 
 
-def product_temperature(log_density_at: Callable[[float], torch.Tensor]) -> tuple[float, dict]:
-    """(tau, record): log_density_at(tau) gives each simulated set's log posterior density at its own
-    parameters [K]; tau maximises their mean over TEMPERATURES."""
-    means = {}
-    for tau in TEMPERATURES:
-        values = log_density_at(tau).double()
-        means[tau] = float(torch.where(torch.isfinite(values), values, torch.tensor(_FLOOR, dtype=values.dtype))
-                           .clamp_min(_FLOOR).mean())
-    best = max(TEMPERATURES, key=lambda tau: (means[tau], tau))
-    return best, {"temperature": best, "sets": len(values),
-                  "mean_log_density": {f"{tau:.4g}": value for tau, value in means.items() if math.isfinite(value)}}
+def miscalibration(levels_of_sets: torch.Tensor, levels: Sequence[float]) -> float:
+    """Sum over `levels` L of ((share of sets whose HPD level is below L) - L)^2 / (L (1 - L) / sets): a
+    chi-square-like distance from calibration, each level's deviation in its own binomial standard errors."""
+    k = len(levels_of_sets)
+    return sum(float((levels_of_sets < level).double().mean() - level) ** 2 / (level * (1 - level) / k)
+               for level in levels)
+
+
+def product_temperature(levels_at: Callable[[float], torch.Tensor], levels: Sequence[float]) -> tuple[float, dict]:
+    """(tau, record): levels_at(tau) gives each simulated set's HPD level of its own parameters [K] (1 where
+    the posterior puts no density there); tau minimises `miscalibration` over COARSE, then over eighths of a
+    doubling around the best, ties to the larger tau (the narrower posterior). The shares inside grow as tau
+    falls, so the distance falls and then rises: the coarse descent stops two steps past its lowest."""
+    tried: dict[float, torch.Tensor] = {}
+
+    def key(tau: float) -> tuple[float, float]:
+        if tau not in tried:
+            tried[tau] = levels_at(tau).double()
+        return miscalibration(tried[tau], levels), -tau
+
+    best = COARSE[0]
+    for i, tau in enumerate(COARSE):
+        if key(tau) < key(best):
+            best = tau
+        elif i - COARSE.index(best) >= 2:
+            break
+    fine = [best * 2.0 ** (step / 8) for step in _FINE_STEPS]
+    best = min([best, *(tau for tau in fine if COARSE[-1] <= tau <= 1)], key=key)
+    return best, {"temperature": best, "sets": len(tried[best]),
+                  "inside": {f"{tau:.4g}": {f"{level:g}": float((values < level).double().mean()) for level in levels}
+                             for tau, values in sorted(tried.items(), reverse=True)}}

@@ -16,7 +16,7 @@
 #   throughput16k  the same for Ant, BallBalance, Ingenuity and Quadcopter at 16,384
 #   humanoid     python -m bayessim_exp experiment=gpu_humanoid device=cuda, twice (cold, then warm)
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
-#   calibration  the known-truth calibration study: sweeps/calibration.yaml (Pendulum, $SEEDS seeds, default 100)
+#   calibration  the known-truth calibration study: sweeps/calibration.yaml (Pendulum, seed=range($SEEDS), default 100)
 #                with device=cuda, $JOBS runs at once on the GPU (default 6), then its report (tarred into $OUT)
 #   round_coverage  benchmarks/round_coverage.py: every task's (or $TASKS') default run, seed 0 (or $ROUND_SEEDS),
 #                device=cuda and $ROUND_ARGS (e.g. sim=native), $JOBS at once
@@ -148,6 +148,7 @@ step_humanoid() {
 }
 
 step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with their report
+    rm -rf /tmp/calibration  # an earlier call's jobs on the same warm machine would join the report
     timeout "${SWEEP_TIMEOUT:-480}" "$PY" -m bayessim_exp --config-dir sweeps --config-name calibration --multirun \
         device=cuda "seed=range(${SEEDS:-100})" hydra/launcher=local \
         "hydra.launcher.n_jobs=${JOBS:-6}" hydra.sweep.dir=/tmp/calibration ${CALIBRATION_ARGS:-}

@@ -7,8 +7,10 @@ Runs `python -m bayessim_exp task=<task> seed=<seed> <overrides>` for every task
 parallel processes, `--jobs` at once), then prints per task, seed and round the expected coverage of the
 50 % and 90 % HPD regions on that round's held-out simulations (diagnostics.held_out_fraction of its own,
 drawn from its proposal), the band the guard accepts for that many pairs, the held-out gain over the
-round's proposal, the guard's action, the mismatch flag, the log-density gain at the surrogate's truth, and
-the run's wall time. A run that fails is listed with its last error line.
+round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py), the
+guard's action, the mismatch flag, the log-density gain at the surrogate's truth and the truth's HPD level
+(inside the 90 % region below 0.9), and the run's wall time. A run that fails is listed with its last error
+line.
 """
 
 from __future__ import annotations
@@ -46,17 +48,20 @@ def rows(outcome: dict) -> list[str]:
 
     head = f"| {outcome['task']} | {outcome['seed']} "
     if "error" in outcome:
-        return [head + f"| failed: {outcome['error'][:150]} | | | | | | | {outcome['seconds']:.0f} |"]
+        return [head + f"| failed: {outcome['error'][:150]} | | | | | | | | | {outcome['seconds']:.0f} |"]
     out = []
     for r in outcome["results"]["rounds"]:
         cov, held = r.get("coverage") or {}, r.get("held_out") or {}
         hpd = cov.get("hpd", {})
         band = coverage_band(0.9, held.get("count", 0)) if held else (float("nan"),) * 2
-        gain = r.get("log_prob_gain")
+        gain, truth = r.get("log_prob_gain"), (r.get("truth") or {}).get("hpd_level")
+        local = ((r.get("local_coverage") or {}).get("hpd") or {}).get("0.9")
         out.append(head + f"| {r['round']} | {hpd.get('0.5', float('nan')):.3f} | {hpd.get('0.9', float('nan')):.3f} | "
                    f"{band[0]:.3f}-{band[1]:.3f} | {held.get('gain_over_proposal', float('nan')):+.2f} | "
+                   f"{'-' if local is None else f'{local:.2f}'} | "
                    f"{r['guard']['action']} | {'yes' if r['mismatch']['flagged'] else 'no'} | "
-                   f"{'null' if gain is None else f'{gain:+.2f}'} | {outcome['seconds']:.0f} |")
+                   f"{'null' if gain is None else f'{gain:+.2f}'} | {'-' if truth is None else f'{truth:.2f}'} | "
+                   f"{outcome['seconds']:.0f} |")
     return out
 
 
@@ -70,8 +75,9 @@ def main() -> None:
     ap.add_argument("overrides", nargs="*", help="added to every run (e.g. device=cuda)")
     args = ap.parse_args()
     jobs = [(task, seed) for task in args.tasks for seed in args.seeds]
-    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | held-out gain over proposal | guard | mismatch "
-          "| gain at truth | run s |\n|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | held-out gain over proposal | local 90 % | guard "
+          "| mismatch | gain at truth | truth's HPD level | run s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+          flush=True)
     outcomes = []
     with ThreadPoolExecutor(args.jobs) as pool:
         futures = [pool.submit(run, *job, args.overrides, args.out) for job in jobs]

@@ -29,6 +29,7 @@ class DiagnosticsConfig:
     predictive_sims: int  # simulations at posterior and at prior draws for the predictive check (0: off)
     replay_sims: int  # posterior and prior draws replayed per real trajectory (0: off)
     combination_sets: int  # simulated sets of as many trajectories as real ones, for the product's temperature
+    local_sets: int  # posterior draws, each with a trajectory simulated there, for the guard's local coverage
     mismatch_alpha: float  # significance of the model-mismatch tests
     mismatch_distance_ratio: float  # replay distance, posterior over prior, above which a trajectory is unexplained
 
@@ -79,10 +80,12 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
     d = rc.diagnostics
     if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
             or d.predictive_sims < 0 or d.replay_sims == 1 or d.replay_sims < 0 or d.combination_sets < 0
+            or d.local_sets < 0
             or not 0 < d.mismatch_alpha < 1
             or not 0 < d.mismatch_distance_ratio < 1):
         raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
                           "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0, diagnostics.combination_sets >= 0, "
+                          "diagnostics.local_sets >= 0, "
                           "diagnostics.replay_sims "
                           "0 or >= 2, 0 < diagnostics.mismatch_alpha < 1, 0 < diagnostics.mismatch_distance_ratio < 1")
     return rc

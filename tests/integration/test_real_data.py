@@ -80,8 +80,9 @@ def test_logs_driven_by_another_controller_are_replayed_and_covered(tmp_path):
     """The issue's case: five trajectories of our own pendulum at 1.6 kg, 0.7 m driven by sines (as a robot's
     excitation log), not by the random collect policy. real=file replays their starts and actions (policy=replay,
     its default), so the simulations are driven as the data were: the truth lies inside the final posterior's
-    90 % region, no mismatch is flagged, and the posterior knows much more than the prior there (+6.7 nats at
-    this budget; the random collect policy's simulations, policy=random, gave +4.0)."""
+    90 % region, no mismatch is flagged, and the posterior knows much more than the prior there: +4.2 nats at this
+    budget, where the random collect policy's simulations (policy=random) gave +1.3 with the truth outside their
+    90 % region (b74b05b, dev box; +6.7 and +4.0 before the product's temperature was fitted by coverage)."""
     path = tmp_path / "sine.npz"
     task = registry.build("task", api.compose(["sim=native"]).task)
     rng = np.random.default_rng(200)
@@ -99,4 +100,4 @@ def test_logs_driven_by_another_controller_are_replayed_and_covered(tmp_path):
     last = results["rounds"][-1]
     assert results["policy"] == "replay"
     assert last["truth"]["hpd_level"] < 0.9 and not last["mismatch"]["flagged"], (last["truth"], last["mismatch"])
-    assert last["log_prob_gain"] > 5.5
+    assert last["log_prob_gain"] > 3.0

@@ -11,7 +11,9 @@ Inputs are what every round measures on its held-out simulations (the last
   (SAMPLING_Z binomial standard errors over the held-out pairs), so a calibrated model checked on few pairs
   is not flagged by chance;
 - the effective sample size of the posterior given the real data, where it is an importance-sampling
-  estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points.
+  estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points;
+- the coverage where the real data put the posterior (local_coverage.py), in the same band as the held-out
+  coverage: below it the model is off near the real data even if it is calibrated on average.
 Each finding is a sentence saying what is wrong and what to try. Underconfidence is a finding but not a
 failure: a posterior wider than the data allow is still safe to randomize with (the round's action,
 method.on_guard, follows failures only).
@@ -49,10 +51,11 @@ def coverage_band(level: float, count: int, tolerance: float = COVERAGE_TOLERANC
 
 def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, count: int,
                     baseline: str = "prior", effective_samples: float | None = None,
-                    tolerance: float = COVERAGE_TOLERANCE) -> GuardReport:
+                    tolerance: float = COVERAGE_TOLERANCE, local: dict | None = None) -> GuardReport:
     """mean_gain: held-out mean log q - log of `baseline` (the round's proposal; nats); coverage: {level (str
     or float): fraction} of HPD regions on `count` held-out simulations; effective_samples: of an
-    importance-sampled posterior (None: closed form). Any may be None (not measured)."""
+    importance-sampled posterior (None: closed form); local: local_coverage's record. Any may be None (not
+    measured)."""
     warnings, failed = [], False
     if mean_gain is not None and not mean_gain > 0:
         failed = True
@@ -76,6 +79,16 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
                 f"underconfident: {value:.0%} of held-out true parameters fall in the {float(level):.0%} credible "
                 f"region (passes up to {high:.0%}): the posterior is wider than the data allow. Try more "
                 "components, a larger network or more epochs (patience)")
+    for level, value in ((local or {}).get("hpd") or {}).items():
+        low = coverage_band(float(level), local["count"], tolerance)[0]
+        if value < low:
+            failed = True
+            warnings.append(
+                f"overconfident near the real data: {value:.0%} of parameters drawn from the posterior fall in the "
+                f"{float(level):.0%} credible region once a trajectory simulated at them is added to the real ones "
+                f"(passes from {low:.0%}): the model is off where the real data lie, which the held-out simulations "
+                "(drawn from the round's proposal) average away. Try more simulations, an ensemble (model.ensemble=3), "
+                "a summarizer that carries more information, or method.proposal=prior")
     if effective_samples is not None and effective_samples < MIN_EFFECTIVE_SAMPLES:
         failed = True
         warnings.append(

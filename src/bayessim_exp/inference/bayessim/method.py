@@ -18,6 +18,7 @@ import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
 from ...diagnostics.guard import ACTIONS, check_posterior
+from ...diagnostics.local_coverage import local_coverage
 from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
@@ -87,8 +88,8 @@ class BayesSim(InferenceMethod):
             Stage("summarize", self.summarize, inputs=("collect",)),
             Stage("fit", self.fit, inputs=("summarize",)),
             Stage("condition", self.condition, inputs=("real", "fit")),
-            Stage("model_check", self.model_check, inputs=("real", "summarize", "condition")),
-            Stage("guard", self.guard, inputs=("fit", "condition")),
+            Stage("model_check", self.model_check, inputs=("real", "summarize", "fit", "condition")),
+            Stage("guard", self.guard, inputs=("fit", "condition", "model_check")),
         ]
 
     # proposals -----------------------------------------------------------------------
@@ -267,13 +268,39 @@ class BayesSim(InferenceMethod):
     def model_check(self, ctx: RoundContext) -> dict:
         """Can the simulator, at parameters the posterior allows, reproduce the real data? The summary
         predictive check and the mismatch verdict (diagnostics/mismatch.py) from the real summaries'
-        place among the simulated ones, the replayed check (condition) and the dispersion."""
+        place among the simulated ones, the replayed check (condition) and the dispersion. And is the model
+        calibrated there (the guard reads `local_coverage`)?"""
         d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
         _, x_train, _, x_held = self._split(ctx.output("summarize"))
         outside = summaries_outside(conditioned["x_real"], x_train, x_held)
         return {"predictive_distance": self._predictive(ctx, conditioned["posterior"], conditioned["x_real"]),
                 "mismatch": mismatch_report(ctx.round, outside, conditioned["unwidened_replay_check"],
-                                            conditioned["dispersion"], d.mismatch_alpha)}
+                                            conditioned["dispersion"], d.mismatch_alpha),
+                "local_coverage": self._local_coverage(ctx, conditioned)}
+
+    def _local_coverage(self, ctx: RoundContext, conditioned: dict) -> dict | None:
+        """diagnostics/local_coverage.py with `diagnostics.local_sets` draws, the real trajectories combined as
+        product at the product's temperature (before the replays widen it: the simulations have no model error)."""
+        d = self.comp.rc.diagnostics
+        if d.local_sets == 0:
+            return None
+        model = self.comp.model()
+        model.load_state_dict(ctx.output("fit")["model"])
+        tau = (conditioned["product_temperature"] or {}).get("temperature", 1.0)
+        seed = stage_seed(ctx.run_seed, ctx.round, "local_coverage")
+
+        def posterior_given(conditionals: list) -> ParameterDistribution:
+            return combine_conditionals(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx),
+                                        ctx.seed, self.probit, "product", tau)[0]
+
+        def simulate(theta: torch.Tensor) -> tuple[torch.Tensor, list]:
+            traj = self.comp.sims.rollout(theta, self.comp.policy(seed, ctx), self.comp.rc.collect.horizon, seed)
+            x = self._summaries(traj)
+            kept = ~traj.diverged.cpu() & torch.isfinite(x).all(-1)
+            return kept, [model.conditional(x_j.float()) for x_j in x[kept]]
+
+        real = [model.conditional(x.float()) for x in conditioned["x_real"]]
+        return local_coverage(posterior_given, real, simulate, d.local_sets, d.levels, d.coverage_samples, seed)
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
         num = self.comp.rc.diagnostics.predictive_sims
@@ -296,7 +323,8 @@ class BayesSim(InferenceMethod):
         baseline = "prior" if self.proposal_name(ctx) == "prior" else f"round's proposal ({self.proposal_name(ctx)})"
         report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
                                  held_out.get("count", 0), baseline,
-                                 ctx.output("condition")["posterior"].effective_sample_size)
+                                 ctx.output("condition")["posterior"].effective_sample_size,
+                                 local=ctx.output("model_check")["local_coverage"])
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
         handed_on = self._handed_on_round(ctx, r - 1) if action == "fallback" else r
         for warning in report.warnings:

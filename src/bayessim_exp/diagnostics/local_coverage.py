@@ -6,7 +6,8 @@ coverage lay in 0.86-0.90 while the palm's mass sat 5-10 posterior standard devi
 
 The check: draw theta_j from the posterior given the real trajectories, simulate one trajectory x_j at each,
 and place theta_j in the posterior given the real trajectories and x_j, conditioned exactly as the real
-ones are. If the per-trajectory model is exact, theta_j given (real data, x_j) is distributed as that
+ones are (BayesSim: as their product at the temperature fitted for products of as many on the proposal's
+sets, so that what products get wrong on average is not counted again). If the per-trajectory model is exact, theta_j given (real data, x_j) is distributed as that
 posterior (the posterior is the prior of x_j), so theta_j lies in its level-L HPD region with probability L,
 whatever the prior and wherever the real data lie. A model biased near the real data moves each theta_j's
 posterior away from it and the share inside falls. (Placing theta_j in the posterior given x_j alone is not

@@ -230,8 +230,9 @@ class BayesSim(InferenceMethod):
         return out
 
     def _product_temperature(self, ctx: RoundContext, model, n: int) -> tuple[float, dict | None]:
-        """With n > 1 real trajectories: the product's temperature fitted on sets of n simulations at the round's
-        held-out parameters (set_calibration.py); (1, None) for one trajectory or without sets."""
+        """For products of n > 1 trajectories (the real ones; for the local check, those and one simulated): the
+        temperature fitted on sets of n simulations at the round's held-out parameters (set_calibration.py);
+        (1, None) for one trajectory or without sets."""
         count = min(self.comp.rc.diagnostics.combination_sets, len(self._split(ctx.output("summarize"))[2]))
         if n < 2 or count == 0:
             return 1.0, None
@@ -279,14 +280,18 @@ class BayesSim(InferenceMethod):
                 "local_coverage": self._local_coverage(ctx, conditioned)}
 
     def _local_coverage(self, ctx: RoundContext, conditioned: dict) -> dict | None:
-        """diagnostics/local_coverage.py with `diagnostics.local_sets` draws, the real trajectories combined as
-        product at the product's temperature (before the replays widen it: the simulations have no model error)."""
+        """diagnostics/local_coverage.py with `diagnostics.local_sets` draws. The n real trajectories and the
+        simulated one are combined as product at the temperature fitted for products of n + 1 on the proposal's
+        sets (_product_temperature), so the check finds what is wrong near the real data beyond what products
+        get wrong on average (the handed-on posterior is widened for that already). No replay widening: the
+        simulations have no model error."""
         d = self.comp.rc.diagnostics
         if d.local_sets == 0:
             return None
         model = self.comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
-        tau = (conditioned["product_temperature"] or {}).get("temperature", 1.0)
+        x_real = conditioned["x_real"].reshape(-1, conditioned["x_real"].shape[-1])
+        tau, _ = self._product_temperature(ctx, model, len(x_real) + 1)
         seed = stage_seed(ctx.run_seed, ctx.round, "local_coverage")
 
         def posterior_given(conditionals: list) -> ParameterDistribution:
@@ -299,8 +304,9 @@ class BayesSim(InferenceMethod):
             kept = ~traj.diverged.cpu() & torch.isfinite(x).all(-1)
             return kept, [model.conditional(x_j.float()) for x_j in x[kept]]
 
-        real = [model.conditional(x.float()) for x in conditioned["x_real"]]
-        return local_coverage(posterior_given, real, simulate, d.local_sets, d.levels, d.coverage_samples, seed)
+        real = [model.conditional(x.float()) for x in x_real]
+        return {**local_coverage(posterior_given, real, simulate, d.local_sets, d.levels, d.coverage_samples, seed),
+                "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
         num = self.comp.rc.diagnostics.predictive_sims

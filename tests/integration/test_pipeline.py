@@ -252,3 +252,17 @@ def test_on_guard_stop_ends_the_run_after_writing_the_round(compose, tmp_path, m
     written = json.loads((tmp_path / "results.json").read_text())
     assert [r["guard"]["action"] for r in written["rounds"]] == ["stop"]
     assert not (tmp_path / "round_002").exists()
+
+
+def test_coverage_near_the_real_data_is_checked_where_asked(compose, tmp_path):
+    """diagnostics.local_sets=60 (off by default: docs/statistics.md): every round records the shares of its
+    posterior's draws inside their regions, at the temperature fitted for products of one more trajectory than
+    the real ones, and a calibrated Pendulum model passes."""
+    results = Pipeline(compose(["logging.progress=false", "rounds=2", "collect.trajectories=2000", *SMALL_BUDGET,
+                                "diagnostics.local_sets=60"]), tmp_path).run()
+    for r in results["rounds"]:
+        local = r["local_coverage"]
+        assert 50 <= local["count"] <= 60 and set(local["hpd"]) == {"0.5", "0.9"} and 0 < local["temperature"] <= 1
+        assert not any("near the real data" in w for w in r["guard"]["warnings"]), r["guard"]
+    assert Pipeline(compose(["logging.progress=false", "rounds=1", *SMOKE]), tmp_path / "off").run()["rounds"][0][
+        "local_coverage"] is None

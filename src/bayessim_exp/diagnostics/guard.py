@@ -12,8 +12,9 @@ Inputs are what every round measures on its held-out simulations (the last
   is not flagged by chance;
 - the effective sample size of the posterior given the real data, where it is an importance-sampling
   estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points;
-- the coverage where the real data put the posterior (local_coverage.py), in the same band as the held-out
-  coverage: below it the model is off near the real data even if it is calibrated on average.
+- where asked (diagnostics.local_sets), the coverage where the real data put the posterior (local_coverage.py),
+  in the same band as the held-out coverage: below it the model is off near the real data even if it is
+  calibrated on average.
 Each finding is a sentence saying what is wrong and what to try. Underconfidence is a finding but not a
 failure: a posterior wider than the data allow is still safe to randomize with (the round's action,
 method.on_guard, follows failures only).

@@ -159,17 +159,21 @@ def _implied_parameters(z: torch.Tensor, theta: torch.Tensor,
                         queries: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The least-squares linear map z ~ a + B (theta - mean) over the replays (z [m, F], theta [m, D]);
     for each query summary [k, F] its implied parameters [k, D] and its RMS residual from the map [k];
-    and B^T B (regularised by a relative 1e-9 so a parameter the summaries ignore stays invertible)."""
+    and B^T B. Both normal matrices are regularised by a relative 1e-9: a parameter the replays do not vary
+    (every posterior draw on the box's edge) or the summaries ignore gets no slope and its mean as implied value."""
     mean_theta, mean_z = theta.mean(0), z.mean(0)
     design = theta - mean_theta
     # the normal equations (D unknowns per feature, D <= tens): LAPACK's least squares gave results that
     # differed in the last digit from run to run
-    B = torch.linalg.solve(design.T @ design, design.T @ (z - mean_z)).T  # [F, D]
-    gram = B.T @ B
-    gram = gram + 1e-9 * gram.diagonal().mean().clamp_min(1e-300) * torch.eye(len(gram), dtype=gram.dtype)
+    B = torch.linalg.solve(_ridged(design.T @ design), design.T @ (z - mean_z)).T  # [F, D]
+    gram = _ridged(B.T @ B)
     offsets = torch.linalg.solve(gram, B.T @ (queries - mean_z).T).T  # [k, D]
     residual = (queries - mean_z - offsets @ B.T).norm(dim=1)
     return mean_theta + offsets, residual, gram
+
+
+def _ridged(normal: torch.Tensor) -> torch.Tensor:
+    return normal + 1e-9 * normal.diagonal().mean().clamp_min(1e-300) * torch.eye(len(normal), dtype=normal.dtype)
 
 
 def _standard(x: torch.Tensor, scale: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:

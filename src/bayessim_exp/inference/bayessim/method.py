@@ -288,6 +288,10 @@ class BayesSim(InferenceMethod):
         d = self.comp.rc.diagnostics
         if d.local_sets == 0:
             return None
+        if conditioned["posterior"].effective_sample_size is not None:  # each draw's posterior would be sampled too
+            log.info("round %d: coverage near the real data skipped: the posterior is an importance-sampling "
+                     "estimate (no closed form)", ctx.round)
+            return None
         model = self.comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
         x_real = conditioned["x_real"].reshape(-1, conditioned["x_real"].shape[-1])

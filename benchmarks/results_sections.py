@@ -254,7 +254,8 @@ class RlSection:
 
 @dataclasses.dataclass
 class ScriptSection:
-    """A script that prints its section's markdown, heading first, to stdout (its progress goes to stderr)."""
+    """A script that prints its section's markdown, heading first, to stdout (its progress goes to stderr), and
+    takes `--out DIR` for its runs."""
 
     name: str
     script: str                          # relative to the repository root
@@ -263,7 +264,9 @@ class ScriptSection:
     cost: float = 300.0
 
     def jobs(self, ctx: Context) -> list[Job]:
-        argv = [sys.executable, self.script, *(self.quick_args if ctx.quick else self.args)]
+        # its runs under the section's work dir, emptied before the jobs start: a run dir left by other code
+        # (the script's default under /tmp) refuses to resume with another config
+        argv = [sys.executable, self.script, *(self.quick_args if ctx.quick else self.args), "--out", str(ctx.work / "runs")]
         return [Job(self.name, argv, self.cost, stdout=ctx.work / "section.md")]
 
     def render(self, ctx: Context, stamp: str) -> str:

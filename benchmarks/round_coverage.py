@@ -8,10 +8,9 @@ parallel processes, `--jobs` at once), then prints per task, seed and round the 
 50 % and 90 % HPD regions on that round's held-out simulations (diagnostics.held_out_fraction of its own,
 drawn from its proposal), the band the guard accepts for that many pairs, the held-out gain over the
 round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py, with the
-override diagnostics.local_sets=100), the
-guard's action, the mismatch flag, the log-density gain at the surrogate's truth and the truth's HPD level
-(inside the 90 % region below 0.9), and the run's wall time. A run that fails is listed with its last error
-line.
+override diagnostics.local_sets=100), the guard's action, the mismatch flag, the log-density gain at the
+surrogate's truth and the truth's HPD level (inside the 90 % region below 0.9), and the run's wall time. A
+run that fails is listed with its last error line.
 """
 
 from __future__ import annotations

@@ -334,7 +334,7 @@ class BayesSim(InferenceMethod):
         report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
                                  held_out.get("count", 0), baseline,
                                  ctx.output("condition")["posterior"].effective_sample_size,
-                                 local=ctx.output("model_check")["local_coverage"])
+                                 local=ctx.output("model_check").get("local_coverage"))
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
         handed_on = self._handed_on_round(ctx, r - 1) if action == "fallback" else r
         for warning in report.warnings:

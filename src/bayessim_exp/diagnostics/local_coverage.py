@@ -7,9 +7,9 @@ coverage lay in 0.86-0.90 while the palm's mass sat 5-10 posterior standard devi
 The check: draw theta_j from the posterior given the real trajectories, simulate one trajectory x_j at each,
 and place theta_j in the posterior given the real trajectories and x_j, conditioned exactly as the real
 ones are (BayesSim: as their product at the temperature fitted for products of as many on the proposal's
-sets, so that what products get wrong on average is not counted again). If the per-trajectory model is exact, theta_j given (real data, x_j) is distributed as that
-posterior (the posterior is the prior of x_j), so theta_j lies in its level-L HPD region with probability L,
-whatever the prior and wherever the real data lie. A model biased near the real data moves each theta_j's
+sets, so that what products get wrong on average is not counted again). If the per-trajectory model is exact,
+theta_j given (real data, x_j) is distributed as that posterior (the posterior is the prior of x_j), so theta_j
+lies in its level-L HPD region with probability L, whatever the prior and wherever the real data lie. A model biased near the real data moves each theta_j's
 posterior away from it and the share inside falls. (Placing theta_j in the posterior given x_j alone is not
 calibrated even for an exact model: where the prior is informative the posterior shrinks toward it, and
 parameters drawn far in its tail fall outside; tests/unit/test_local_coverage.py.)
@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 import torch
 
 from ..distributions.base import ParameterDistribution
-from .scoring import hpd_level
+from .scoring import own_level, shares_inside
 
 
 def local_coverage(posterior_given: Callable[[list], ParameterDistribution], real: list,
@@ -36,13 +36,8 @@ def local_coverage(posterior_given: Callable[[list], ParameterDistribution], rea
     generator = torch.Generator().manual_seed(seed)
     theta = posterior_given(real).sample((count,), generator=generator).double()
     kept, simulated = simulate(theta)
-    inside = []
-    for t, q in zip(theta[kept], simulated):
-        post = posterior_given([*real, q])
-        level = hpd_level(post, t[None], post.sample((draws,), generator=generator).double(), generator)
-        inside.append(1.0 if level is None else level)  # no density at its own parameters: outside every region
-    level_of = torch.tensor(inside, dtype=torch.float64)
-    if len(level_of) == 0:
+    if not simulated:
         return {"count": 0, "hpd": None}
-    return {"count": len(level_of),
-            "hpd": {f"{level:g}": float((level_of < level).double().mean()) for level in levels}}
+    level_of = torch.tensor([own_level(posterior_given([*real, q]), t, draws, generator)
+                             for t, q in zip(theta[kept], simulated)], dtype=torch.float64)
+    return {"count": len(level_of), "hpd": shares_inside(level_of, levels)}

@@ -40,6 +40,19 @@ def hpd_level(posterior: ParameterDistribution, theta: torch.Tensor, draws: torc
     return float((lp > at_theta).double().mean()) + float(torch.rand(1, generator=generator, dtype=torch.float64)) * ties
 
 
+
+def own_level(posterior: ParameterDistribution, theta: torch.Tensor, draws: int, generator: torch.Generator) -> float:
+    """hpd_level of a simulation's own parameters theta [D] among `draws` fresh draws of the posterior given it;
+    1 (outside every region) where the posterior has no density there."""
+    level = hpd_level(posterior, theta[None], posterior.sample((draws,), generator=generator).double(), generator)
+    return 1.0 if level is None else level
+
+
+def shares_inside(levels_of: torch.Tensor, levels) -> dict[str, float]:
+    """{level: share of the HPD levels `levels_of` below it}: how often the level-L regions held their parameters."""
+    return {f"{level:g}": float((levels_of < level).double().mean()) for level in levels}
+
+
 def truth_rank(posterior: ParameterDistribution, names: list[str], true: np.ndarray, seed: int) -> dict:
     """{"hpd_level": hpd_level of theta* among TRUTH_DRAWS draws, "marginal_rank": {name: share of draws
     below theta*_d}}."""

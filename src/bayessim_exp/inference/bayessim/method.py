@@ -23,7 +23,7 @@ from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
 from ...diagnostics.replayed_check import replayed_check
-from ...diagnostics.scoring import hpd_level
+from ...diagnostics.scoring import own_level
 from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
@@ -183,9 +183,13 @@ class BayesSim(InferenceMethod):
         cut = len(summary["theta"]) - n_val
         return summary["theta"][:cut], summary["x"][:cut], summary["theta"][cut:], summary["x"][cut:]
 
-    def condition(self, ctx: RoundContext) -> dict:
+    def _fitted_model(self, ctx: RoundContext):
         model = self.comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
+        return model
+
+    def condition(self, ctx: RoundContext) -> dict:
+        model = self._fitted_model(ctx)
         real = real_trajectories(ctx)
         x_real = self._summaries(real)
         spreads = []
@@ -238,30 +242,35 @@ class BayesSim(InferenceMethod):
             return 1.0, None
         theta = self._split(ctx.output("summarize"))[2][:count].double()
         seed = stage_seed(ctx.run_seed, ctx.round, "product_temperature")  # its own stream, as the checks'
-        traj = self.comp.sims.rollout(theta.repeat_interleave(n, 0), self.comp.policy(seed, ctx),
-                                      self.comp.rc.collect.horizon, seed)
-        x = self._summaries(traj).double().reshape(count, n, -1)
-        ok = (~traj.diverged.cpu()).reshape(count, n).all(1) & torch.isfinite(x).all(-1).all(-1)
-        theta, x = theta[ok], x[ok]
+        kept, x = self._simulate(ctx, theta.repeat_interleave(n, 0), seed)
+        ok = kept.reshape(count, n).all(1)
+        theta, x = theta[ok], x.reshape(count, n, -1)[ok]
 
         draws = self.comp.rc.diagnostics.coverage_samples
         conditionals = [[model.conditional(x_i.float()) for x_i in x_set] for x_set in x]
 
         def levels_at(temperature: float) -> torch.Tensor:
             generator = torch.Generator().manual_seed(seed)  # the same draws' stream at every temperature
-            levels = []
-            for q, t in zip(conditionals, theta):
-                post = combine_conditionals(q, self.comp.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
-                                            self.probit, "product", temperature)[0]
-                level = hpd_level(post, t[None], post.sample((draws,), generator=generator).double(), generator)
-                levels.append(1.0 if level is None else level)
-            return torch.tensor(levels, dtype=torch.float64)
+            return torch.tensor([own_level(self._product(ctx, q, temperature), t, draws, generator)
+                                 for q, t in zip(conditionals, theta)], dtype=torch.float64)
 
         tau, record = product_temperature(levels_at, self.comp.rc.diagnostics.levels)
         if tau < 1:
             log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
                      ctx.round, n, tau, len(theta))
         return tau, record
+
+    def _product(self, ctx: RoundContext, conditionals: list, temperature: float) -> ParameterDistribution:
+        """The posterior given trajectories' per-trajectory posteriors, combined as the tempered product."""
+        return combine_conditionals(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx),
+                                    ctx.seed, self.probit, "product", temperature)[0]
+
+    def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """One trajectory at each theta [K, D] under the collect policy: (kept [K]: neither diverged nor with a
+        non-finite summary, summaries [K, F] in float64)."""
+        traj = self.comp.sims.rollout(theta, self.comp.policy(seed, ctx), self.comp.rc.collect.horizon, seed)
+        x = self._summaries(traj).double()
+        return ~traj.diverged.cpu() & torch.isfinite(x).all(-1), x
 
     def _summaries(self, traj: Trajectories) -> torch.Tensor:
         return self.comp.summarizer(traj.to(self.comp.device)).cpu()
@@ -292,25 +301,18 @@ class BayesSim(InferenceMethod):
             log.info("round %d: coverage near the real data skipped: the posterior is an importance-sampling "
                      "estimate (no closed form)", ctx.round)
             return None
-        model = self.comp.model()
-        model.load_state_dict(ctx.output("fit")["model"])
+        model = self._fitted_model(ctx)
         x_real = conditioned["x_real"].reshape(-1, conditioned["x_real"].shape[-1])
         tau, _ = self._product_temperature(ctx, model, len(x_real) + 1)
         seed = stage_seed(ctx.run_seed, ctx.round, "local_coverage")
 
-        def posterior_given(conditionals: list) -> ParameterDistribution:
-            return combine_conditionals(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx),
-                                        ctx.seed, self.probit, "product", tau)[0]
-
         def simulate(theta: torch.Tensor) -> tuple[torch.Tensor, list]:
-            traj = self.comp.sims.rollout(theta, self.comp.policy(seed, ctx), self.comp.rc.collect.horizon, seed)
-            x = self._summaries(traj)
-            kept = ~traj.diverged.cpu() & torch.isfinite(x).all(-1)
+            kept, x = self._simulate(ctx, theta, seed)
             return kept, [model.conditional(x_j.float()) for x_j in x[kept]]
 
         real = [model.conditional(x.float()) for x in x_real]
-        return {**local_coverage(posterior_given, real, simulate, d.local_sets, d.levels, d.coverage_samples, seed),
-                "temperature": tau}
+        return {**local_coverage(lambda conditionals: self._product(ctx, conditionals, tau), real, simulate,
+                                 d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
         num = self.comp.rc.diagnostics.predictive_sims

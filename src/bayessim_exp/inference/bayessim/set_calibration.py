@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 
 import torch
 
+from ...diagnostics.scoring import shares_inside
+
 COARSE = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
 _FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the best coarse one
 
@@ -58,5 +60,4 @@ def product_temperature(levels_at: Callable[[float], torch.Tensor], levels: Sequ
     fine = [best * 2.0 ** (step / 8) for step in _FINE_STEPS]
     best = min([best, *(tau for tau in fine if COARSE[-1] <= tau <= 1)], key=key)
     return best, {"temperature": best, "sets": len(tried[best]),
-                  "inside": {f"{tau:.4g}": {f"{level:g}": float((values < level).double().mean()) for level in levels}
-                             for tau, values in sorted(tried.items(), reverse=True)}}
+                  "inside": {f"{tau:.4g}": shares_inside(values, levels) for tau, values in sorted(tried.items(), reverse=True)}}

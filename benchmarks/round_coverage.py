@@ -8,7 +8,8 @@ parallel processes, `--jobs` at once), then prints per task, seed and round the 
 50 % and 90 % HPD regions on that round's held-out simulations (diagnostics.held_out_fraction of its own,
 drawn from its proposal), the band the guard accepts for that many pairs, the held-out gain over the
 round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py, with the
-override diagnostics.local_sets=100), the guard's action, the mismatch flag, the log-density gain at the
+override diagnostics.local_sets=100), the smallest p-value of the real data's distance from the training
+simulations (diagnostics/extrapolation.py; the guard fails below alpha / n), the guard's action, the mismatch flag, the log-density gain at the
 surrogate's truth and the truth's HPD level (inside the 90 % region below 0.9), and the run's wall time. A
 run that fails is listed with its last error line.
 """
@@ -48,7 +49,7 @@ def rows(outcome: dict) -> list[str]:
 
     head = f"| {outcome['task']} | {outcome['seed']} "
     if "error" in outcome:
-        return [head + f"| failed: {outcome['error'][:150]} | | | | | | | | | {outcome['seconds']:.0f} |"]
+        return [head + f"| failed: {outcome['error'][:150]} | | | | | | | | | | {outcome['seconds']:.0f} |"]
     out = []
     for r in outcome["results"]["rounds"]:
         cov, held = r.get("coverage") or {}, r.get("held_out") or {}
@@ -56,9 +57,10 @@ def rows(outcome: dict) -> list[str]:
         band = coverage_band(0.9, held.get("count", 0)) if held else (float("nan"),) * 2
         gain, truth = r.get("log_prob_gain"), (r.get("truth") or {}).get("hpd_level")
         local = ((r.get("local_coverage") or {}).get("hpd") or {}).get("0.9")
+        outside = (r.get("extrapolation") or {}).get("min_p_value")
         out.append(head + f"| {r['round']} | {hpd.get('0.5', float('nan')):.3f} | {hpd.get('0.9', float('nan')):.3f} | "
                    f"{band[0]:.3f}-{band[1]:.3f} | {held.get('gain_over_proposal', float('nan')):+.2f} | "
-                   f"{'-' if local is None else f'{local:.2f}'} | "
+                   f"{'-' if local is None else f'{local:.2f}'} | {'-' if outside is None else f'{outside:.3f}'} | "
                    f"{r['guard']['action']} | {'yes' if r['mismatch']['flagged'] else 'no'} | "
                    f"{'null' if gain is None else f'{gain:+.2f}'} | {'-' if truth is None else f'{truth:.2f}'} | "
                    f"{outcome['seconds']:.0f} |")
@@ -75,8 +77,9 @@ def main() -> None:
     ap.add_argument("overrides", nargs="*", help="added to every run (e.g. device=cuda)")
     args = ap.parse_args()
     jobs = [(task, seed) for task in args.tasks for seed in args.seeds]
-    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | held-out gain over proposal | local 90 % | guard "
-          "| mismatch | gain at truth | truth's HPD level | run s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | held-out gain over proposal | local 90 % "
+          "| outside p | guard | mismatch | gain at truth | truth's HPD level | run s |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
           flush=True)
     outcomes = []
     with ThreadPoolExecutor(args.jobs) as pool:

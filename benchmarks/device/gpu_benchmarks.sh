@@ -16,12 +16,18 @@
 #   throughput16k  the same for Ant, BallBalance, Ingenuity and Quadcopter at 16,384
 #   humanoid     python -m bayessim_exp experiment=gpu_humanoid device=cuda, twice (cold, then warm)
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
-#   calibration  the known-truth calibration study: sweeps/calibration.yaml (Pendulum, seed=range($SEEDS), default 100)
-#                with device=cuda, $JOBS runs at once on the GPU (default 6), then its report (tarred into $OUT)
+#   calibration  the known-truth calibration study: sweeps/calibration.yaml (seed=range($SEEDS), default 100) on
+#                each task of $CAL_TASKS (default Pendulum) in turn, with device=cuda and $CALIBRATION_ARGS, $JOBS
+#                runs at once (default 6), each task's sweep stopped after $SWEEP_TIMEOUT seconds; then its report,
+#                tarred into $OUT/calibration_<task>.tar.gz
 #   round_coverage  benchmarks/round_coverage.py: every task's (or $TASKS') default run, seed 0 (or $ROUND_SEEDS),
 #                device=cuda and $ROUND_ARGS (e.g. sim=native), $JOBS at once
 #   foreign      benchmarks/foreign_dynamics.py, 14 runs at once simulating on the CPUs, fitting on the GPU
 #   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
+#
+#   background STEP...  the steps, started in their own process session so that they outlast this call (a warm
+#                machine keeps them running until it goes back): their logs and files go to /tmp/background_out
+#   collect      what the background steps have written so far, copied into $OUT (their logs' tails printed)
 #
 # Logs and JSON go to $OUT (./device_out where OUT is unset), one log per step, each headed by the commit, the
 # machine and the date. Every step runs even when an earlier one failed; the exit status is 1 if any failed.
@@ -148,14 +154,17 @@ step_humanoid() {
 }
 
 step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with their report
-    rm -rf /tmp/calibration  # an earlier call's jobs on the same warm machine would join the report
-    timeout "${SWEEP_TIMEOUT:-480}" "$PY" -m bayessim_exp --config-dir sweeps --config-name calibration --multirun \
-        device=cuda "seed=range(${SEEDS:-100})" hydra/launcher=local \
-        "hydra.launcher.n_jobs=${JOBS:-6}" hydra.sweep.dir=/tmp/calibration ${CALIBRATION_ARGS:-}
-    local rc=$?
-    "$PY" -m bayessim_exp.report /tmp/calibration
-    (cd /tmp && tar -czf "$OUT/calibration.tar.gz" calibration/report calibration/*/results.json \
-        calibration/*/config.yaml calibration/*/.hydra calibration/*/error.txt 2>/dev/null)
+    local rc=0 task dir
+    for task in ${CAL_TASKS:-Pendulum}; do
+        dir=calibration_$task
+        rm -rf "/tmp/$dir"  # an earlier call's jobs on the same warm machine would join the report
+        timeout "${SWEEP_TIMEOUT:-480}" "$PY" -m bayessim_exp --config-dir sweeps --config-name calibration --multirun \
+            device=cuda "task=$task" "seed=range(${SEEDS:-100})" hydra/launcher=local \
+            "hydra.launcher.n_jobs=${JOBS:-6}" "hydra.sweep.dir=/tmp/$dir" ${CALIBRATION_ARGS:-} || rc=1
+        "$PY" -m bayessim_exp.report "/tmp/$dir"
+        (cd /tmp && tar -czf "$OUT/$dir.tar.gz" "$dir"/report "$dir"/*/results.json "$dir"/*/config.yaml \
+            "$dir"/*/.hydra "$dir"/*/error.txt 2>/dev/null)
+    done
     return $rc
 }
 
@@ -187,6 +196,19 @@ run_step() {  # run_step NAME: step_NAME logged to $OUT/NAME.log, stopped after 
 if [ "${1:-}" = stash-warp ] && [ $# = 1 ]; then  # the first Warp call carries no wheels
     install_warp
     exit $?
+fi
+BACKGROUND_OUT=/tmp/background_out
+if [ "${1:-}" = collect ] && [ $# = 1 ]; then
+    for log in "$BACKGROUND_OUT"/*.log; do [ -f "$log" ] && { say "${log##*/}"; tail -n 15 "$log"; }; done
+    cp -r "$BACKGROUND_OUT"/. "$OUT"/ 2>/dev/null
+    exit 0
+fi
+if [ "${1:-}" = background ]; then  # the steps in a new session: it installs, then runs them, after this call ends
+    shift
+    mkdir -p "$BACKGROUND_OUT"
+    OUT=$BACKGROUND_OUT setsid nohup bash "$0" "$@" >"$BACKGROUND_OUT/background.log" 2>&1 </dev/null &
+    say "started in the background: $* (bash $0 collect copies their outputs)"
+    exit 0
 fi
 install_wheels || exit 1
 install_warp || exit 1

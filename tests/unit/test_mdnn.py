@@ -82,7 +82,7 @@ def test_ensemble_is_the_equally_weighted_average_of_different_members():
     assert post.num_components == 6
     members = []
     for member in model.members:  # each member alone, as a one-network MDNN would condition (same spread factors)
-        logits, means, U = member(model._inputs(x_obs[None]))
+        logits, means, U = member(model.inputs(x_obs[None]))
         U_inv = torch.linalg.inv(model.spread.scale_factors(U)[0].double())
         members.append(GaussianMixture(logits[0], means[0], U_inv @ U_inv.transpose(-1, -2))
                        .affine(model.theta_norm.shift, model.theta_norm.scale))

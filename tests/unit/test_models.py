@@ -162,7 +162,7 @@ def test_calibration_recovers_a_known_spread_factor(name):
         theta = (mean + stretch * (draws - mean)).float()
         before = model.spread.log_scale.clone()
         model.spread.log_scale.zero_()  # factors relative to the trained network, as fit() calibrates
-        found = torch.tensor(model._calibrate(model.theta_norm(theta), model._inputs(x)))
+        found = torch.tensor(model._calibrate(model.theta_norm(theta), model.inputs(x)))
         model.spread.log_scale.copy_(before)
         assert ((found / factor - 1).abs() < 0.1).all(), (stretch, found)
 

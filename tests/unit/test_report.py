@@ -128,14 +128,16 @@ def test_a_job_with_a_null_gain_is_counted_and_named_not_averaged_away(tmp_path)
     assert "`all`, `log_prob_gain`: `1_s1`: **the final posterior put zero density at the truth**" in markdown
 
 
-def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False):
-    """A known-truth job: one round record per HPD level of the truth."""
+def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False, outside=False):
+    """A known-truth job: one round record per HPD level of the truth; `outside`: its last round's real data lay
+    outside the training simulations."""
     out = results(seed, [gain] * len(levels))
     for record, level in zip(out["rounds"], levels):
         record["truth"] = {"hpd_level": level, "marginal_rank": dict(zip(["a", "b"], ranks))}
         record["guard"] = {"ok": not guard_failed, "failed": guard_failed, "warnings": [],
                            "action": "fallback" if guard_failed else "none"}
         record["mismatch"] = {"flagged": flagged}
+        record["extrapolation"] = {"flagged": [0] if outside and record is out["rounds"][-1] else []}
     return out
 
 
@@ -150,7 +152,7 @@ def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_
         level = None if k == 0 else (k + 0.5) / 100
         make_job(sweep, f"{k}_s{k}", [f"seed={k}"], result=truth_results(
             k, [0.95, level], [(k + 0.5) / 100, 0.5], gain=None if k == 0 else 1.0,
-            guard_failed=k < 3, flagged=k == 7))
+            guard_failed=k < 3, flagged=k == 7, outside=k in (3, 4)))
     make_job(sweep, "100_s100", ["seed=100"], result=results(100, [1.0, 1.0]))  # no truth recorded: left out
     build_report(sweep, posteriors=False)
     with (sweep / "report" / "calibration.csv").open() as f:
@@ -161,11 +163,13 @@ def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_
     assert float(row["ci_high_0.9"]) == pytest.approx(beta.ppf(0.975, 90, 11), abs=1e-4)
     assert (row["zero_density"], row["gain_above_zero"], row["guard_failed_final"], row["fallback_final"],
             row["flagged_final"], row["flagged_any"]) == ("1", "99", "3", "3", "1", "1")
+    assert (row["outside_rounds"], row["rounds_checked"]) == ("2", "200")
     markdown = (sweep / "report" / "report.md").read_text()
     assert "100 truths (1 finished jobs without a known truth left out)" in markdown
     assert "| 1 | 0/100 = 0.00 [0.00, 0.04] | 0/100 = 0.00 [0.00, 0.04] |" in markdown
     assert "90% region 89/100 = 0.89 [0.81, 0.94]" in markdown
     assert "**1 final posterior(s) put zero density at the truth**" in markdown
+    assert "Real data outside the training simulations (a guard failure): 2/200 = 0.01 [0.00, 0.04]" in markdown
     assert (sweep / "report" / "sbc_ranks_00.png").stat().st_size > 1000
 
 

@@ -12,6 +12,8 @@ Inputs are what every round measures on its held-out simulations (the last
   is not flagged by chance;
 - the effective sample size of the posterior given the real data, where it is an importance-sampling
   estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points;
+- where the real data lie among the simulations the model was trained on (extrapolation.py): a real summary
+  farther from them than all but a share alpha / n of the held-out simulations gets an extrapolated posterior;
 - where asked (diagnostics.local_sets), the coverage where the real data put the posterior (local_coverage.py),
   in the same band as the held-out coverage: below it the model is off near the real data even if it is
   calibrated on average.
@@ -52,11 +54,12 @@ def coverage_band(level: float, count: int, tolerance: float = COVERAGE_TOLERANC
 
 def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, count: int,
                     baseline: str = "prior", effective_samples: float | None = None,
-                    tolerance: float = COVERAGE_TOLERANCE, local: dict | None = None) -> GuardReport:
+                    tolerance: float = COVERAGE_TOLERANCE, local: dict | None = None,
+                    extrapolation: dict | None = None) -> GuardReport:
     """mean_gain: held-out mean log q - log of `baseline` (the round's proposal; nats); coverage: {level (str
     or float): fraction} of HPD regions on `count` held-out simulations; effective_samples: of an
-    importance-sampled posterior (None: closed form); local: local_coverage's record. Any may be None (not
-    measured)."""
+    importance-sampled posterior (None: closed form); local: local_coverage's record; extrapolation:
+    inputs_outside's record. Any may be None (not measured)."""
     warnings, failed = [], False
     if mean_gain is not None and not mean_gain > 0:
         failed = True
@@ -90,6 +93,16 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
                 f"(passes from {low:.0%}): the model is off where the real data lie, which the held-out simulations "
                 "(drawn from the round's proposal) average away. Try more simulations, an ensemble (model.ensemble=3), "
                 "a summarizer that carries more information, or method.proposal=prior")
+    if extrapolation is not None and extrapolation["flagged"]:
+        failed = True
+        far = extrapolation["flagged"]
+        warnings.append(
+            f"the real data lie outside the simulations the model was trained on: real trajectories {far} are "
+            f"farther from them (squared distances {[round(extrapolation['distance'][i], 1) for i in far]}, held-out "
+            f"median {extrapolation['held_out_median']:.1f}) than all but {[extrapolation['p_value'][i] for i in far]} "
+            "of the held-out simulations: the posterior there is an extrapolation. A real system in the joint tail "
+            "of independent ranges (every mass scaled alike) needs a prior that holds it; else try more simulations, "
+            "policy=replay with the real actions, or model.project_inputs=false")
     if effective_samples is not None and effective_samples < MIN_EFFECTIVE_SAMPLES:
         failed = True
         warnings.append(

@@ -24,6 +24,11 @@ class PosteriorModel(Protocol):
 
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture: ...
 
+    def inputs(self, x: torch.Tensor) -> torch.Tensor:
+        """What q(theta | x) is a function of, for summaries x [N, F]: [N, E] (standardised summaries, or their
+        ridge predictions of the parameters); the guard measures how far the real data's lie from the training
+        simulations' (diagnostics/extrapolation.py)."""
+
     def state_dict(self) -> dict: ...
 
     def load_state_dict(self, state: dict) -> None: ...
@@ -72,7 +77,7 @@ class StandardizedDensityModel:
 
     Subclasses build `self.net` (a module holding every trainable part and the standardisers
     `self.x_norm`, `self.theta_norm`, and `self.projection` when cfg.project_inputs) and define
-    `_nll(theta_std, inputs)` and `conditional`, which reads its inputs through `self._inputs(x)`.
+    `_nll(theta_std, inputs)` and `conditional`, which reads its inputs through `self.inputs(x)`.
     """
 
     cfg: TrainConfig
@@ -82,7 +87,7 @@ class StandardizedDensityModel:
     fitted: bool = False
     projection = None
 
-    def _inputs(self, x: torch.Tensor) -> torch.Tensor:
+    def inputs(self, x: torch.Tensor) -> torch.Tensor:
         """What the network sees: standardised summaries, or their ridge predictions of the parameters."""
         z = self.x_norm(x)
         return z if self.projection is None else self.projection(z)
@@ -112,7 +117,7 @@ class StandardizedDensityModel:
         try:
             if inputs is None:
                 with torch.no_grad():
-                    inputs = self._inputs(x)
+                    inputs = self.inputs(x)
             theta_std = self.theta_norm(theta)
             history = train_density(self.net, self._nll, theta_std, inputs, self.cfg,
                                     seed=seed, label=label, on_epoch=on_epoch)

@@ -96,7 +96,7 @@ class Flow(StandardizedDensityModel):
     def conditional(self, x_obs: torch.Tensor) -> FlowConditional:
         """q(theta | x_obs) for one summary x_obs [F], with sample and log_prob in parameter units."""
         self.net.eval()
-        dist = self.flow(self.embedding(self._inputs(x_obs.float().reshape(1, -1)))[0])
+        dist = self.flow(self.embedding(self.inputs(x_obs.float().reshape(1, -1)))[0])
         return FlowConditional(dist, self.theta_norm.shift, self.theta_norm.scale)
 
 

@@ -75,15 +75,18 @@ class LinearGaussian:
         return {"train": [train_nll], "val": [val_nll], "best_val": val_nll, "epochs": 1,
                 "penalty": self.cfg.penalties[best]}
 
+    def inputs(self, x: torch.Tensor) -> torch.Tensor:
+        """The standardised summaries the regression reads."""
+        return (x.double() - self.shift) / self.scale
+
     @torch.no_grad()
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
-        z = (x_obs.double().reshape(1, -1) - self.shift) / self.scale
-        return GaussianMixture(torch.zeros(1), _predict(z, self.weights), self.cov[None])
+        return GaussianMixture(torch.zeros(1), _predict(self.inputs(x_obs.reshape(1, -1)), self.weights), self.cov[None])
 
     @torch.no_grad()
     def conditionals(self, x: torch.Tensor) -> MixtureBatch:
         """q(theta | x_n) for every row of x [N, F] (held-out checks, batched)."""
-        means = _predict((x.double() - self.shift) / self.scale, self.weights)
+        means = _predict(self.inputs(x), self.weights)
         factor = torch.linalg.cholesky(torch.linalg.inv(self.cov), upper=True)
         n, d = means.shape
         return MixtureBatch(torch.zeros(n, 1), means[:, None], factor.expand(n, 1, d, d))

@@ -175,7 +175,7 @@ class MDNN(StandardizedDensityModel):
     def conditionals(self, x: torch.Tensor) -> MixtureBatch:
         """q(theta | x_n) in parameter units for every row of x [N, F] (held-out checks, batched)."""
         self.net.eval()
-        log_w, means, U = self._mixtures(self._inputs(x.float()))
+        log_w, means, U = self._mixtures(self.inputs(x.float()))
         shift, scale = self.theta_norm.shift.double(), self.theta_norm.scale.double()
         # theta = shift + scale * theta_std: the precision factors divide by the scale, column by column
         return MixtureBatch(log_w, means.double() * scale + shift, self.spread.scale_factors(U).double() / scale)
@@ -184,7 +184,7 @@ class MDNN(StandardizedDensityModel):
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:
         """q(theta | x_obs) in parameter units, for one summary x_obs [F]: the members' mixtures, equally weighted."""
         self.net.eval()
-        log_w, means, U = (part[0] for part in self._mixtures(self._inputs(x_obs.float().reshape(1, -1))))
+        log_w, means, U = (part[0] for part in self._mixtures(self.inputs(x_obs.float().reshape(1, -1))))
         logits, U = log_w.double(), self.spread.scale_factors(U)
         eye = torch.eye(self.theta_dim, dtype=torch.float64)
         U_inv = torch.linalg.solve_triangular(U.double(), eye.expand_as(U), upper=True)

@@ -7,7 +7,8 @@ denser than the truth (inside the level-L region iff below L; null, zero density
 prior when the pipeline is calibrated). Per configuration: the share of truths inside the 50 % and 90 %
 regions with a Clopper-Pearson 95 % interval, per round; the gain at the truth (quartiles, share above zero,
 count of zero densities); how often the guard failed or handed on another distribution and how often the
-mismatch flag fired, in the final round and in any round; and one PNG of SBC rank histograms per parameter
+mismatch flag fired, in the final round and in any round; in how many rounds the real data lay outside the
+training simulations (diagnostics/extrapolation.py: with truths from the prior, its false alarms); and one PNG of SBC rank histograms per parameter
 of the final round, each with the binomial 99 % band of a uniform histogram.
 """
 
@@ -39,6 +40,7 @@ class Calibration:
     handed_on_other: int  # final rounds whose guard handed on another distribution (fallback)
     flagged_final: int
     flagged_any: int
+    outside_rounds: tuple[int, int]  # rounds whose real data lay outside the training simulations, rounds checked
     ranks: dict[str, list[float]]  # parameter -> final round's marginal ranks
 
 
@@ -75,6 +77,8 @@ def calibration(jobs: list[Job]) -> Calibration | None:
     def flagged(record: dict) -> bool:
         return bool((record.get("mismatch") or {}).get("flagged"))
 
+    checked = [r["extrapolation"] for j in known for r in j.results["rounds"] if r.get("extrapolation")]
+
     return Calibration(
         jobs=len(known), left_out=sum(1 for j in jobs if j.results) - len(known), inside=inside,
         gains=[f.get("log_prob_gain") for f in finals],
@@ -82,7 +86,8 @@ def calibration(jobs: list[Job]) -> Calibration | None:
         guard_failed_any=sum(any(guard_failed(r) for r in j.results["rounds"]) for j in known),
         handed_on_other=sum((f.get("guard") or {}).get("action") == "fallback" for f in finals),
         flagged_final=sum(flagged(f) for f in finals),
-        flagged_any=sum(any(flagged(r) for r in j.results["rounds"]) for j in known), ranks=ranks)
+        flagged_any=sum(any(flagged(r) for r in j.results["rounds"]) for j in known),
+        outside_rounds=(sum(bool(e["flagged"]) for e in checked), len(checked)), ranks=ranks)
 
 
 def _share(k: int, n: int) -> str:
@@ -110,7 +115,9 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
               + (f"; **{zero} final posterior(s) put zero density at the truth**" if zero else "") + ".",
               f"Guard failed: final round {c.guard_failed_final} of {c.jobs}, any round {c.guard_failed_any}; "
               f"the final round handed on another distribution (fallback) in {c.handed_on_other}. "
-              f"Mismatch flagged: final round {c.flagged_final} of {c.jobs}, any round {c.flagged_any}."]
+              f"Mismatch flagged: final round {c.flagged_final} of {c.jobs}, any round {c.flagged_any}. "
+              "Real data outside the training simulations (a guard failure): "
+              + (f"{_share(*c.outside_rounds)} of the rounds checked." if c.outside_rounds[1] else "not checked.")]
     if figure is not None:
         lines += ["", f"![SBC ranks of `{config}`]({figure.name})"]
     return lines + [""]
@@ -123,14 +130,14 @@ def csv_row(config: str, c: Calibration) -> list:
         row += [k, n, f"{k / n:.4f}", *(f"{v:.4f}" for v in clopper_pearson(k, n))]
     gains = [g for g in c.gains if g is not None and math.isfinite(g)]
     row += [sum(g > 0 for g in gains), len(c.gains) - len(gains), c.guard_failed_final, c.guard_failed_any,
-            c.handed_on_other, c.flagged_final, c.flagged_any]
+            c.handed_on_other, c.flagged_final, c.flagged_any, *c.outside_rounds]
     return row
 
 
 CSV_HEADER = ["configuration", "truths",
               *(f"{name}_{level:g}" for level in LEVELS for name in ("inside", "rounds_of", "share", "ci_low", "ci_high")),
               "gain_above_zero", "zero_density", "guard_failed_final", "guard_failed_any", "fallback_final",
-              "flagged_final", "flagged_any"]
+              "flagged_final", "flagged_any", "outside_rounds", "rounds_checked"]
 
 
 def rank_figure(c: Calibration, title: str, path: Path) -> Path:

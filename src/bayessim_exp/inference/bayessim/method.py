@@ -17,6 +17,7 @@ import logging
 import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
+from ...diagnostics.extrapolation import inputs_outside
 from ...diagnostics.guard import ACTIONS, check_posterior
 from ...diagnostics.local_coverage import local_coverage
 from ...diagnostics.mismatch import mismatch_report, summaries_outside
@@ -142,8 +143,7 @@ class BayesSim(InferenceMethod):
 
     def fit(self, ctx: RoundContext) -> dict:
         r = ctx.round
-        first = r if self.cfg.proposal in _SINGLE_ROUND_PROPOSALS else 1
-        data = [self._split(ctx.output("summarize", k)) for k in range(first, r + 1)]
+        data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         theta, x = self._fitted_space(torch.cat([d[0] for d in data])), torch.cat([d[1] for d in data])
         model = self.comp.model()
         if r > 1 and self.cfg.finetune:
@@ -170,6 +170,10 @@ class BayesSim(InferenceMethod):
                     "gain_over_proposal": over_prior - float(proposal_ratio.mean())}
         return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
                 "held_out": held_out}
+
+    def _fitted_rounds(self, ctx: RoundContext) -> range:
+        """The rounds whose simulations the round's model is trained on."""
+        return range(ctx.round if self.cfg.proposal in _SINGLE_ROUND_PROPOSALS else 1, ctx.round + 1)
 
     def _fitted_space(self, theta: torch.Tensor) -> torch.Tensor:
         return theta if self.probit is None else self.probit.to_probit(theta).float()
@@ -278,15 +282,30 @@ class BayesSim(InferenceMethod):
     def model_check(self, ctx: RoundContext) -> dict:
         """Can the simulator, at parameters the posterior allows, reproduce the real data? The summary
         predictive check and the mismatch verdict (diagnostics/mismatch.py) from the real summaries'
-        place among the simulated ones, the replayed check (condition) and the dispersion. And is the model
-        calibrated there (the guard reads `local_coverage`)?"""
+        place among the simulated ones, the replayed check (condition) and the dispersion. And does the model
+        know the real data: do they lie among its training simulations, is it calibrated there (the guard reads
+        `extrapolation` and `local_coverage`)?"""
         d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
         _, x_train, _, x_held = self._split(ctx.output("summarize"))
         outside = summaries_outside(conditioned["x_real"], x_train, x_held)
         return {"predictive_distance": self._predictive(ctx, conditioned["posterior"], conditioned["x_real"]),
                 "mismatch": mismatch_report(ctx.round, outside, conditioned["unwidened_replay_check"],
                                             conditioned["dispersion"], d.mismatch_alpha),
+                "extrapolation": self._extrapolation(ctx, conditioned["x_real"]),
                 "local_coverage": self._local_coverage(ctx, conditioned)}
+
+    def _extrapolation(self, ctx: RoundContext, x_real: torch.Tensor) -> dict | None:
+        """diagnostics/extrapolation.py: the real summaries' model inputs among the training simulations' (None
+        without held-out simulations or with `diagnostics.extrapolation_alpha` 0)."""
+        alpha = self.comp.rc.diagnostics.extrapolation_alpha
+        data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
+        if alpha == 0 or len(data[-1][3]) == 0:
+            return None
+        model = self._fitted_model(ctx)
+        with torch.no_grad():
+            train = torch.cat([model.inputs(x_train) for _, x_train, _, _ in data])
+            return inputs_outside(model.inputs(x_real.reshape(-1, x_real.shape[-1])), train,
+                                  model.inputs(data[-1][3]), alpha)
 
     def _local_coverage(self, ctx: RoundContext, conditioned: dict) -> dict | None:
         """diagnostics/local_coverage.py with `diagnostics.local_sets` draws. The n real trajectories and the
@@ -336,7 +355,8 @@ class BayesSim(InferenceMethod):
         report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
                                  held_out.get("count", 0), baseline,
                                  ctx.output("condition")["posterior"].effective_sample_size,
-                                 local=ctx.output("model_check").get("local_coverage"))
+                                 local=ctx.output("model_check").get("local_coverage"),
+                                 extrapolation=ctx.output("model_check").get("extrapolation"))
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
         handed_on = self._handed_on_round(ctx, r - 1) if action == "fallback" else r
         for warning in report.warnings:

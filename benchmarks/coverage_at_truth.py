@@ -1,0 +1,77 @@
+"""A finished run's model at its own true parameters: how often q(theta | x) holds the truth in its 50 % and 90 %
+HPD regions over trajectories simulated there, beside as many parameters drawn from the prior, and where the
+truth's summaries lie among the model's training inputs (diagnostics/extrapolation.py).
+
+    PYTHONPATH=src python benchmarks/coverage_at_truth.py outputs/<run>/<date> --round 1 --sims 200
+
+Held-out coverage averages over the proposal; a Bayesian posterior need not cover every fixed truth, but a
+model calibrated over the prior that misses one truth this often extrapolates there (docs/statistics.md, "Real
+data outside the simulations"). Each trajectory is conditioned on alone (the round's model and proposal, the
+method's parameter space); the summaries come from the run's collect policy (rl-based policies, which need the
+round's actor, are not supported here).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import torch
+from omegaconf import OmegaConf
+
+from bayessim_exp.artifacts import RunDir
+from bayessim_exp.components import build_components
+from bayessim_exp.diagnostics.extrapolation import inputs_outside
+from bayessim_exp.diagnostics.scoring import own_level
+from bayessim_exp.inference.bayessim.condition import condition
+from bayessim_exp.run_config import check_run_config
+from bayessim_exp.stages import RoundContext
+
+
+def coverage(comp, ctx: RoundContext, model, theta: torch.Tensor, seed: int) -> tuple[dict, torch.Tensor]:
+    """Shares of theta's rows inside their own posterior's 50 % / 90 % regions, one trajectory each; the summaries."""
+    traj = comp.sims.rollout(theta, comp.policy(seed, ctx), comp.rc.collect.horizon, seed)
+    x = comp.summarizer(traj.to(comp.device)).cpu()
+    kept = ~traj.diverged.cpu() & torch.isfinite(x).all(-1)
+    proposal = comp.method.proposal(ctx)
+    generator = torch.Generator().manual_seed(seed)
+    levels = torch.tensor([own_level(condition(model, x_i, comp.prior, proposal=proposal, seed=seed,
+                                               probit=comp.method.probit)[0], t.double(), 500, generator)
+                           for t, x_i in zip(theta[kept], x[kept])])
+    return {f"{level:g}": float((levels < level).double().mean()) for level in (0.5, 0.9)}, x[kept]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path)
+    ap.add_argument("--round", type=int, default=1)
+    ap.add_argument("--sims", type=int, default=200, help="trajectories at the truth and prior draws")
+    ap.add_argument("--seed", type=int, default=123)
+    args = ap.parse_args()
+    cfg = OmegaConf.load(args.run / "config.yaml")
+    comp = build_components(cfg, check_run_config(cfg))
+    if comp.real.true_params is None:
+        raise SystemExit(f"{args.run}: the run's real data carry no true parameters")
+    ctx = RoundContext(comp, RunDir(args.run), args.round, comp.rc.seed, None)
+    model = comp.model()
+    model.load_state_dict(ctx.output("fit")["model"])
+    truth = torch.as_tensor(comp.real.true_params, dtype=torch.float64)
+    at_truth, x_truth = coverage(comp, ctx, model, truth[None].repeat(args.sims, 1), args.seed)
+    drawn = comp.prior.sample((args.sims,), generator=torch.Generator().manual_seed(args.seed)).double()
+    at_prior, _ = coverage(comp, ctx, model, drawn, args.seed + 1)
+
+    summaries = [ctx.output("summarize", k) for k in range(1, args.round + 1)]
+    cut = [len(s["x"]) - int(comp.rc.diagnostics.held_out_fraction * len(s["x"])) for s in summaries]
+    with torch.no_grad():
+        train = torch.cat([model.inputs(s["x"][:c]) for s, c in zip(summaries, cut)])
+        outside = inputs_outside(model.inputs(x_truth), train, model.inputs(summaries[-1]["x"][cut[-1]:]), 0.01)
+    distances = torch.tensor(outside["distance"])
+    print(f"| run | round | trajectories | at the truth: 50 % / 90 % | prior draws: 50 % / 90 % | truth's inputs: "
+          f"median distance (held-out median), share with p < 0.01 |\n|---|---|---|---|---|---|\n"
+          f"| {args.run} | {args.round} | {len(x_truth)} | {at_truth['0.5']:.2f} / {at_truth['0.9']:.2f} | "
+          f"{at_prior['0.5']:.2f} / {at_prior['0.9']:.2f} | {float(distances.median()):.1f} "
+          f"({outside['held_out_median']:.1f}), {sum(p < 0.01 for p in outside['p_value']) / len(distances):.2f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -3,6 +3,10 @@ HPD regions over trajectories simulated there, beside as many parameters drawn f
 truth's summaries lie among the model's training inputs (diagnostics/extrapolation.py).
 
     PYTHONPATH=src python benchmarks/coverage_at_truth.py outputs/<run>/<date> --round 1 --sims 200
+    PYTHONPATH=src python benchmarks/coverage_at_truth.py RUN --refit model.project_inputs=false   # another model
+
+`--refit OVERRIDE...` fits the run's model with those overrides (on the training simulations of rounds 1 to
+--round, pooled as the run's truncated rounds are) instead of loading the round's own, and checks that one.
 
 Held-out coverage averages over the proposal; a Bayesian posterior need not cover every fixed truth, but a
 model calibrated over the prior that misses one truth this often extrapolates there (docs/statistics.md, "Real
@@ -19,6 +23,7 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
+from bayessim_exp import registry
 from bayessim_exp.artifacts import RunDir
 from bayessim_exp.components import build_components
 from bayessim_exp.diagnostics.extrapolation import inputs_outside
@@ -41,34 +46,53 @@ def coverage(comp, ctx: RoundContext, model, theta: torch.Tensor, seed: int) -> 
     return {f"{level:g}": float((levels < level).double().mean()) for level in (0.5, 0.9)}, x[kept]
 
 
+def fitted_space(comp, theta: torch.Tensor) -> torch.Tensor:
+    return theta if comp.method.probit is None else comp.method.probit.to_probit(theta).float()
+
+
+def refit(comp, cfg, overrides: list[str], theta: torch.Tensor, x: torch.Tensor):
+    """The run's model config with `overrides`, fitted on training simulations (theta in the method's space)."""
+    model_cfg = OmegaConf.merge(cfg.model, OmegaConf.from_dotlist([o.removeprefix("model.") for o in overrides]))
+    model = registry.build("model", model_cfg, theta_dim=comp.task.spec.dim, x_dim=comp.x_dim)
+    model.fit(theta, x, seed=0, label="refit")
+    return model
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
     ap.add_argument("--round", type=int, default=1)
     ap.add_argument("--sims", type=int, default=200, help="trajectories at the truth and prior draws")
     ap.add_argument("--seed", type=int, default=123)
+    ap.add_argument("--refit", nargs="+", metavar="OVERRIDE", help="model overrides to fit instead (model.name=...)")
     args = ap.parse_args()
     cfg = OmegaConf.load(args.run / "config.yaml")
     comp = build_components(cfg, check_run_config(cfg))
     if comp.real.true_params is None:
         raise SystemExit(f"{args.run}: the run's real data carry no true parameters")
     ctx = RoundContext(comp, RunDir(args.run), args.round, comp.rc.seed, None)
-    model = comp.model()
-    model.load_state_dict(ctx.output("fit")["model"])
+    summaries = [ctx.output("summarize", k) for k in range(1, args.round + 1)]
+    cut = [len(s["x"]) - int(comp.rc.diagnostics.held_out_fraction * len(s["x"])) for s in summaries]
+    theta_train = fitted_space(comp, torch.cat([s["theta"][:c] for s, c in zip(summaries, cut)]))
+    x_train = torch.cat([s["x"][:c] for s, c in zip(summaries, cut)])
+    if args.refit:
+        model = refit(comp, cfg, args.refit, theta_train, x_train)
+    else:
+        model = comp.model()
+        model.load_state_dict(ctx.output("fit")["model"])
     truth = torch.as_tensor(comp.real.true_params, dtype=torch.float64)
     at_truth, x_truth = coverage(comp, ctx, model, truth[None].repeat(args.sims, 1), args.seed)
     drawn = comp.prior.sample((args.sims,), generator=torch.Generator().manual_seed(args.seed)).double()
     at_prior, _ = coverage(comp, ctx, model, drawn, args.seed + 1)
 
-    summaries = [ctx.output("summarize", k) for k in range(1, args.round + 1)]
-    cut = [len(s["x"]) - int(comp.rc.diagnostics.held_out_fraction * len(s["x"])) for s in summaries]
     with torch.no_grad():
-        train = torch.cat([model.inputs(s["x"][:c]) for s, c in zip(summaries, cut)])
-        outside = inputs_outside(model.inputs(x_truth), train, model.inputs(summaries[-1]["x"][cut[-1]:]), 0.01)
+        outside = inputs_outside(model.inputs(x_truth), model.inputs(x_train), theta_train,
+                                 model.inputs(summaries[-1]["x"][cut[-1]:]), 0.01)
     distances = torch.tensor(outside["distance"])
-    print(f"| run | round | trajectories | at the truth: 50 % / 90 % | prior draws: 50 % / 90 % | truth's inputs: "
-          f"median distance (held-out median), share with p < 0.01 |\n|---|---|---|---|---|---|\n"
-          f"| {args.run} | {args.round} | {len(x_truth)} | {at_truth['0.5']:.2f} / {at_truth['0.9']:.2f} | "
+    label = " ".join(args.refit) if args.refit else "the run's"
+    print(f"| run | round | model | trajectories | at the truth: 50 % / 90 % | prior draws: 50 % / 90 % | truth's summaries: "
+          f"median distance (held-out median), share with p < 0.01 |\n|---|---|---|---|---|---|---|\n"
+          f"| {args.run} | {args.round} | {label} | {len(x_truth)} | {at_truth['0.5']:.2f} / {at_truth['0.9']:.2f} | "
           f"{at_prior['0.5']:.2f} / {at_prior['0.9']:.2f} | {float(distances.median()):.1f} "
           f"({outside['held_out_median']:.1f}), {sum(p < 0.01 for p in outside['p_value']) / len(distances):.2f} |")
 

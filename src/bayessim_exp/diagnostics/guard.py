@@ -13,7 +13,9 @@ Inputs are what every round measures on its held-out simulations (the last
 - the effective sample size of the posterior given the real data, where it is an importance-sampling
   estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points;
 - where the real data lie among the simulations the model was trained on (extrapolation.py): a real summary
-  farther from them than all but a share alpha / n of the held-out simulations gets an extrapolated posterior;
+  farther from them than all but a share alpha / n of the held-out simulations gets an extrapolated posterior
+  (BayesSim leaves this out where the real trajectories were replayed and the posterior widened by what the
+  replays leave unexplained: that measures the same difference near the posterior);
 - where asked (diagnostics.local_sets), the coverage where the real data put the posterior (local_coverage.py),
   in the same band as the held-out coverage: below it the model is off near the real data even if it is
   calibrated on average.

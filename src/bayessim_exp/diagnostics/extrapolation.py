@@ -11,12 +11,13 @@ outside the simulations").
 the parameters (models/projection.py, as the projected models' own inputs) predicts them for every summary, and
 each real prediction's squared Mahalanobis distance from the training predictions (their mean and covariance)
 is its statistic. Raw summaries have directions in which the simulator hardly varies (relations between
-consecutive states that its integrator fixes); a real system integrated otherwise lies far out in them although
-the posterior hardly depends on them (benchmarks/foreign_dynamics.py: a pendulum integrated by RK4). The p-value is the share
-(1 + #held-out simulations as far or farther) / (held-out + 1), exact (uniform) when the real summary is
-exchangeable with the round's held-out simulations, whatever their distribution. With n real summaries a round is
-flagged when one p-value is below alpha / n (Bonferroni: at most alpha under any dependence between them, such as
-one hidden parameter vector shared by all).
+consecutive states that its integrator fixes); a real system integrated otherwise lies far out in them, although
+the posterior hardly depends on them (benchmarks/foreign_dynamics.py: a pendulum integrated by RK4).
+
+The p-value is the share (1 + #held-out simulations as far or farther) / (held-out + 1), exact (uniform) when
+the real summary is exchangeable with the round's held-out simulations, whatever their distribution. With n real
+summaries a round is flagged when one p-value is below alpha / n (Bonferroni: at most alpha under any dependence
+between them, such as one hidden parameter vector shared by all).
 """
 
 from __future__ import annotations

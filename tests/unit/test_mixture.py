@@ -32,6 +32,22 @@ def test_mixture_product_weights_follow_overlap():
     torch.testing.assert_close(w, expected / expected.sum(), atol=1e-9, rtol=0)
 
 
+def _random_mixture(k: int, d: int, seed: int) -> GaussianMixture:
+    g = torch.Generator().manual_seed(seed)
+    factors = torch.randn(k, d, d, generator=g, dtype=torch.float64)
+    covs = factors @ factors.transpose(-1, -2) / d + 0.1 * torch.eye(d, dtype=torch.float64)
+    return GaussianMixture(torch.randn(k, generator=g), torch.randn(k, d, generator=g), covs)
+
+
+def test_product_kept_to_its_heaviest_components_is_the_pruned_full_product():
+    a, b = _random_mixture(6, 4, 0), _random_mixture(5, 4, 1)
+    full, kept = a.product(b).prune(7), a.product(b, max_components=7)
+    assert kept.num_components == 7
+    torch.testing.assert_close(kept.log_weights, full.log_weights, atol=1e-12, rtol=0)
+    torch.testing.assert_close(kept.means, full.means, atol=1e-12, rtol=0)
+    torch.testing.assert_close(kept.covs, full.covs, atol=1e-12, rtol=0)
+
+
 def test_moments_and_sampling_agree():
     mix = GaussianMixture(torch.tensor([0.0, 1.0]), torch.tensor([[0.0, 0.0], [3.0, 1.0]]),
                           torch.stack([torch.eye(2), 0.5 * torch.eye(2)]))

@@ -136,24 +136,28 @@ class GaussianMixture(ParameterDistribution):
         s = scale.double()
         return GaussianMixture(self.log_weights, self.means * s + shift.double(), self.covs * s[:, None] * s[None, :])
 
-    def product(self, other: GaussianMixture) -> GaussianMixture:
-        """The normalised product density p(theta) * q(theta) / Z, a mixture of K1*K2 Gaussians.
+    def product(self, other: GaussianMixture, max_components: int | None = None) -> GaussianMixture:
+        """The normalised product density p(theta) * q(theta) / Z, a mixture of K1*K2 Gaussians, or of its
+        `max_components` heaviest (renormalised, as `prune`): only those get their means and covariances, the
+        costly part in many dimensions.
 
         N(a, A) N(b, B) = N(a; b, A + B) * N(c, C) with C = (A^-1 + B^-1)^-1, c = C (A^-1 a + B^-1 b).
         """
         a, b = self.means[:, None], other.means[None, :]  # [K1, 1, D], [1, K2, D]
-        A, B = self.covs[:, None], other.covs[None, :]
-        S = A + B
-        L = torch.linalg.cholesky(S)
-        diff = (a - b).unsqueeze(-1)
-        z = torch.linalg.solve_triangular(L, diff, upper=False).squeeze(-1)
+        L = torch.linalg.cholesky(self.covs[:, None] + other.covs[None, :])
+        z = torch.linalg.solve_triangular(L, (a - b).unsqueeze(-1), upper=False).squeeze(-1)
         log_norm = -0.5 * (z**2).sum(-1) - torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1) - 0.5 * self.dim * _LOG_2PI
+        logits = (self.log_weights[:, None] + other.log_weights[None, :] + log_norm).reshape(-1)
+        keep = torch.arange(len(logits))
+        if max_components is not None and len(logits) > max_components:
+            keep = torch.topk(logits, max_components).indices
+        i, j = keep // other.num_components, keep % other.num_components
+        A, B, L = self.covs[i], other.covs[j], L.reshape(-1, self.dim, self.dim)[keep]
         # C = A S^-1 B and c = B S^-1 a + A S^-1 b, symmetric and stable without inverting A or B
         C = A @ torch.cholesky_solve(B, L)
-        c = (B @ torch.cholesky_solve(a.unsqueeze(-1), L) + A @ torch.cholesky_solve(b.unsqueeze(-1), L)).squeeze(-1)
-        logits = self.log_weights[:, None] + other.log_weights[None, :] + log_norm
-        d = self.dim
-        return GaussianMixture(logits.reshape(-1), c.reshape(-1, d), C.reshape(-1, d, d))
+        c = (B @ torch.cholesky_solve(self.means[i].unsqueeze(-1), L)
+             + A @ torch.cholesky_solve(other.means[j].unsqueeze(-1), L)).squeeze(-1)
+        return GaussianMixture(logits[keep], c, C)
 
     def superlevel_box(self, level: float, over_standard_normal: bool = False) -> tuple[torch.Tensor, torch.Tensor] | None:
         """A box (lo, hi) holding every theta where log q(theta) - log r(theta) >= level, with r = N(0, I)

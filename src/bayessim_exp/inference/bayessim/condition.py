@@ -10,13 +10,15 @@ normal prior, and the result is mapped back to the box.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 
 from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...models.base import PosteriorModel
 from .combination import Dispersion, combine
-from .correction import needs_no_correction
+from .correction import needs_no_correction, tempered_posterior
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
@@ -29,16 +31,7 @@ def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components:
     prior None means an improper flat prior (no truncation); proposal None means simulations from the prior.
     probit: the transform the model's parameters were fitted in, or None for parameter units.
     """
-    x_obs = x_obs.reshape(-1, x_obs.shape[-1])
-    return combine_conditionals([model.conditional(x) for x in x_obs], prior, max_components, proposal, seed, probit,
-                                combination, temperature)
-
-
-def combine_conditionals(conditionals: list, prior, max_components: int = 50, proposal=None, seed: int = 0,
-                         probit: ProbitTransform | None = None, combination: str = "dispersion",
-                         temperature: float = 1.0) -> tuple[ParameterDistribution, Dispersion | None]:
-    """`condition` from the model's per-trajectory posteriors q(theta | x_i), for callers that combine the
-    same ones at several temperatures."""
+    conditionals = [model.conditional(x) for x in x_obs.reshape(-1, x_obs.shape[-1])]
     if probit is None:
         return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed,
                        temperature=temperature)
@@ -46,6 +39,18 @@ def combine_conditionals(conditionals: list, prior, max_components: int = 50, pr
                            _probit_proposal(proposal, prior), max_components=max_components, seed=seed,
                            temperature=temperature)
     return ProbitPosterior(post, probit), spread
+
+
+def tempered_product(conditionals: list, prior, max_components: int = 50, proposal=None, seed: int = 0,
+                     probit: ProbitTransform | None = None) -> Callable[[float], ParameterDistribution]:
+    """The posterior given the model's per-trajectory posteriors q(theta | x_i), combined as their product with
+    the likelihood ratios raised to a temperature, as a function of the temperature (correction.py's
+    tempered_posterior: the product is computed once however many temperatures are asked for)."""
+    if probit is None:
+        return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)
+    at = tempered_posterior(conditionals, standard_normal_prior(probit.dim), _probit_proposal(proposal, prior),
+                            max_components=max_components, seed=seed)
+    return lambda temperature: ProbitPosterior(at(temperature), probit)
 
 
 def _probit_proposal(proposal, prior):

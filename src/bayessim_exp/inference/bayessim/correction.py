@@ -19,11 +19,13 @@ See docs/statistics.md for the assumptions.
 
 from __future__ import annotations
 
+import functools
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 
+from ...distributions.base import ParameterDistribution
 from ...distributions.importance import DefensiveMixture, ImportancePosterior
 from ...distributions.independent import BoxUniform, GaussianPrior
 from ...distributions.mixture import GaussianMixture, TruncatedMixture
@@ -113,7 +115,7 @@ def _moment_gaussian(dist) -> GaussianMixture:
 def _product(mixtures: Sequence[GaussianMixture], max_components: int) -> GaussianMixture:
     out = mixtures[0].prune(max_components)
     for m in mixtures[1:]:
-        out = out.product(m).prune(max_components)
+        out = out.product(m, max_components)
     return out
 
 
@@ -140,6 +142,14 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
         product; combination.py chooses it when trajectories disagree).
     Returns a distribution with sample(shape) and log_prob(theta).
     """
+    return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)(temperature)
+
+
+def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = 50,
+                       seed: int = 0) -> Callable[[float], ParameterDistribution]:
+    """`posterior` as a function of the temperature, for callers that need it at several: the product of the
+    conditionals, which no temperature changes (the power is applied to it), is computed once, at the first
+    call that needs it."""
     n = len(conditionals)
     if n == 0:
         raise ValueError("posterior needs at least one real summary")
@@ -149,44 +159,55 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     corrected = [p for p in proposals if not needs_no_correction(p, prior)]
     for p in corrected:
         _check_covers(prior, p)
-    if not 0.0 < temperature <= 1.0:
-        raise ValueError(f"temperature must be in (0, 1], got {temperature}")
-    tau = float(temperature)
-    prior_power = 1 - tau * (n - len(corrected))  # p * prod over uncorrected factors of (1/p)^tau
     box = _box(prior)
+    prior_factor = _gaussian_factor(prior)
 
-    reason = _closed_form_obstacle(conditionals, prior, prior_power, corrected)
-    if reason is None:
-        lam, eta = _ratio_natural(prior, prior_power, corrected, conditionals[0].dim, tau)
-        result = _closed_form(conditionals, max_components, tau, lam, eta)
-        prior_factor = _gaussian_factor(prior)
-        if result is None and isinstance(prior_factor, tuple):
-            # a component wider than a Gaussian prior is a fitting artefact (no posterior of a Gaussian
-            # prior is); dividing by the prior then leaves a negative precision: narrow it to the prior's
-            narrowed = [_no_wider_than(q, prior_factor[1]) for q in conditionals]
-            result = _closed_form(narrowed, max_components, tau, lam, eta)
+    @functools.cache
+    def product(narrowed: bool) -> GaussianMixture:
+        # a component wider than a Gaussian prior is a fitting artefact (no posterior of a Gaussian prior is);
+        # dividing by the prior then leaves a negative precision: `narrowed` clamps it to the prior's
+        factors = [_no_wider_than(q, prior_factor[1]) for q in conditionals] if narrowed else conditionals
+        return _product(factors, max_components)
+
+    @functools.cache
+    def moment_product() -> GaussianMixture:
+        return _product([_moment_gaussian(q) for q in conditionals], max_components)
+
+    def at(temperature: float):
+        if not 0.0 < temperature <= 1.0:
+            raise ValueError(f"temperature must be in (0, 1], got {temperature}")
+        tau = float(temperature)
+        prior_power = 1 - tau * (n - len(corrected))  # p * prod over uncorrected factors of (1/p)^tau
+        reason = _closed_form_obstacle(conditionals, prior, prior_power, corrected)
+        if reason is None:
+            lam, eta = _ratio_natural(prior, prior_power, corrected, conditionals[0].dim, tau)
+            result = _closed_form(product(False), tau, lam, eta)
+            if result is None and isinstance(prior_factor, tuple):
+                result = _closed_form(product(True), tau, lam, eta)
+                if result is not None:
+                    log.info("posterior: components wider than the prior narrowed to it, keeping the closed form")
             if result is not None:
-                log.info("posterior: components wider than the prior narrowed to it, keeping the closed form")
-        if result is not None:
-            return result if box is None else TruncatedMixture(result, *box, seed=seed)
-        reason = "a component's corrected precision is not positive definite"
-    elif n == 1 and prior_power == 0 and not corrected:
-        q = conditionals[0]  # a flow trained on prior draws: its density is the posterior up to the support
-        return q if box is None else Restricted(q, *box, seed=seed)
-    base_mix = _temper(_product([_moment_gaussian(q) for q in conditionals], max_components), tau)
-    inflated = GaussianMixture(base_mix.log_weights, base_mix.means, _INFLATE * base_mix.covs)
-    parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
-    log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected, tau)
-    result = ImportancePosterior(log_target, DefensiveMixture(parts), num=_IS_DRAWS, seed=seed)
-    log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample size %.0f",
-                reason, _IS_DRAWS, result.ess)
-    return result
+                return result if box is None else TruncatedMixture(result, *box, seed=seed)
+            reason = "a component's corrected precision is not positive definite"
+        elif n == 1 and prior_power == 0 and not corrected:
+            q = conditionals[0]  # a flow trained on prior draws: its density is the posterior up to the support
+            return q if box is None else Restricted(q, *box, seed=seed)
+        base_mix = _temper(moment_product(), tau)
+        inflated = GaussianMixture(base_mix.log_weights, base_mix.means, _INFLATE * base_mix.covs)
+        parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
+        log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected, tau)
+        result = ImportancePosterior(log_target, DefensiveMixture(parts), num=_IS_DRAWS, seed=seed)
+        log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample "
+                    "size %.0f", reason, _IS_DRAWS, result.ess)
+        return result
+
+    return at
 
 
-def _closed_form(conditionals: Sequence[GaussianMixture], max_components: int, tau: float, lam, eta):
-    """The tempered product of the conditionals times exp(-theta^T lam theta / 2 + eta^T theta); None
-    where a corrected precision is not positive definite."""
-    mix = _temper(_product(conditionals, max_components), tau)
+def _closed_form(product: GaussianMixture, tau: float, lam, eta) -> GaussianMixture | None:
+    """The conditionals' product raised to tau, times exp(-theta^T lam theta / 2 + eta^T theta); None where a
+    corrected precision is not positive definite."""
+    mix = _temper(product, tau)
     return mix if lam is None else _apply_gaussian_ratio(mix, lam, eta)
 
 

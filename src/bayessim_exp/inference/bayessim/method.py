@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Callable
 
 import torch
 
@@ -34,7 +35,7 @@ from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, real_trajectories
 from .combination import COMBINATIONS
-from .condition import combine_conditionals, condition
+from .condition import condition, tempered_product
 from .proposals import moment_matched
 from .replay_tempering import temper_to_replays
 from .set_calibration import product_temperature
@@ -251,12 +252,12 @@ class BayesSim(InferenceMethod):
         theta, x = theta[ok], x.reshape(count, n, -1)[ok]
 
         draws = self.comp.rc.diagnostics.coverage_samples
-        conditionals = [[model.conditional(x_i.float()) for x_i in x_set] for x_set in x]
+        products = [self._products(ctx, [model.conditional(x_i.float()) for x_i in x_set]) for x_set in x]
 
         def levels_at(temperature: float) -> torch.Tensor:
             generator = torch.Generator().manual_seed(seed)  # the same draws' stream at every temperature
-            return torch.tensor([own_level(self._product(ctx, q, temperature), t, draws, generator)
-                                 for q, t in zip(conditionals, theta)], dtype=torch.float64)
+            return torch.tensor([own_level(product(temperature), t, draws, generator)
+                                 for product, t in zip(products, theta)], dtype=torch.float64)
 
         tau, record = product_temperature(levels_at, self.comp.rc.diagnostics.levels)
         if tau < 1:
@@ -264,10 +265,11 @@ class BayesSim(InferenceMethod):
                      ctx.round, n, tau, len(theta))
         return tau, record
 
-    def _product(self, ctx: RoundContext, conditionals: list, temperature: float) -> ParameterDistribution:
-        """The posterior given trajectories' per-trajectory posteriors, combined as the tempered product."""
-        return combine_conditionals(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx),
-                                    ctx.seed, self.probit, "product", temperature)[0]
+    def _products(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
+        """The posterior given trajectories' per-trajectory posteriors, combined as the product tempered to the
+        temperature it is called with (their product computed once)."""
+        return tempered_product(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
+                                self.probit)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
         """One trajectory at each theta [K, D] under the collect policy: (kept [K]: neither diverged nor with a
@@ -332,7 +334,7 @@ class BayesSim(InferenceMethod):
             return kept, [model.conditional(x_j.float()) for x_j in x[kept]]
 
         real = [model.conditional(x.float()) for x in x_real]
-        return {**local_coverage(lambda conditionals: self._product(ctx, conditionals, tau), real, simulate,
+        return {**local_coverage(lambda conditionals: self._products(ctx, conditionals)(tau), real, simulate,
                                  d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:

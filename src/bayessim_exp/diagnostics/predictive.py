@@ -12,6 +12,8 @@ from collections.abc import Callable
 
 import torch
 
+from ..models.base import column_scale
+
 
 def predictive_distances(simulate_summaries: Callable[[torch.Tensor], torch.Tensor], x_real: torch.Tensor,
                          posterior, prior, num: int = 200, seed: int = 0) -> dict[str, float]:
@@ -21,7 +23,7 @@ def predictive_distances(simulate_summaries: Callable[[torch.Tensor], torch.Tens
         torch.manual_seed(seed)
         x_post = simulate_summaries(posterior.sample((num,)).double()).double()
         x_prior = simulate_summaries(prior.sample((num,)).double()).double()
-    scale = x_prior.std(0).clamp_min(1e-8)
+    scale = column_scale(x_prior)
     x_real = x_real.double().reshape(-1, x_real.shape[-1])
 
     def distance(x_sim: torch.Tensor) -> float:

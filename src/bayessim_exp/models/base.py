@@ -56,8 +56,20 @@ class TrainConfig:
             raise ConfigError("weight_decay must be >= 0")
 
 
+_ROUNDING = 1e-6  # a column whose spread is below this share of its size differs by float32 rounding only
+
+
+def column_scale(data: torch.Tensor) -> torch.Tensor:
+    """Each column's standard deviation over the rows of `data` [N, F], and 1 for a column that is constant
+    up to float rounding: its rounding noise would turn a later real difference (a simulation of the next
+    round, real data) into an input of millions."""
+    std = data.std(0)
+    constant = std <= _ROUNDING * (1 + data.abs().amax(0))
+    return torch.where(constant, torch.ones_like(std), std)
+
+
 class Standardizer(torch.nn.Module):
-    """Affine map to zero mean and unit variance, fitted once and then kept (fine-tuning)."""
+    """Affine map to zero mean and unit variance (column_scale), fitted once and then kept (fine-tuning)."""
 
     def __init__(self, dim: int):
         super().__init__()
@@ -66,7 +78,7 @@ class Standardizer(torch.nn.Module):
 
     def fit(self, data: torch.Tensor) -> None:
         self.shift.copy_(data.mean(0))
-        self.scale.copy_(data.std(0).clamp_min(1e-8))
+        self.scale.copy_(column_scale(data))
 
     def forward(self, data: torch.Tensor) -> torch.Tensor:
         return (data - self.shift) / self.scale

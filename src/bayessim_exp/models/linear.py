@@ -17,6 +17,7 @@ import torch
 from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError, TrainingError
 from ..registry import register
+from .base import column_scale
 from .projection import RidgeSystem
 
 
@@ -53,7 +54,7 @@ class LinearGaussian:
         n_val = max(1, int(round(self.cfg.val_fraction * n)))
         if n - n_val <= 2:
             raise TrainingError(f"{label}: {n} simulations are too few to train on")
-        self.shift, self.scale = x.mean(0), x.std(0).clamp_min(1e-8)
+        self.shift, self.scale = x.mean(0), column_scale(x)
         z = (x - self.shift) / self.scale
         val = torch.zeros(n, dtype=torch.bool)
         val[torch.randperm(n, generator=torch.Generator().manual_seed(seed))[:n_val]] = True

@@ -194,7 +194,7 @@ def test_fine_tuning_on_a_round_where_a_constant_summary_varies(name):
     """A summary constant in round 1 up to float rounding (BallBalance's ball falling freely at a late time
     step) and off by half a unit in one simulation of round 2, where the ball hit something: fine-tuning
     keeps round 1's standardisation, and dividing that deviation by round 1's rounding noise made the
-    inputs tens of millions and the gradients non-finite (9 of 50 BallBalance truths failed in round 2)."""
+    inputs tens of millions and the gradients non-finite (9 of 50 BallBalance truths stopped so in rounds 2 and 3)."""
     theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 600, seed=0)
     x = SIM.simulate(theta, seed=1)
     constant = torch.full((600, 1), -1.766) + 1e-7 * (torch.arange(600) % 3 == 0).float()[:, None]

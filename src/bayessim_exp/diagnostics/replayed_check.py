@@ -49,9 +49,8 @@ from collections.abc import Callable
 
 import torch
 
+from ..models.base import constant_columns
 from ..sim.trajectories import Trajectories
-
-_CONSTANT = 1e-9  # a feature whose spread over the prior's replays is below this (relative) does not vary
 
 
 @dataclasses.dataclass
@@ -129,7 +128,7 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
             residual_p.append(0.0), p_values.append(0.0)
             continue
         scale = reference.std(0)
-        keep = scale > _CONSTANT * (1 + reference.abs().max(0).values)
+        keep = ~constant_columns(reference)
         z_sims, z_real = _standard(sims, scale, keep), _standard(x_real[i : i + 1], scale, keep)
         d_post.append(float(torch.cdist(z_sims, z_real)[:, 0].median()))
         d_prior.append(float(torch.cdist(_standard(reference, scale, keep), z_real)[:, 0].median()))

@@ -59,13 +59,17 @@ class TrainConfig:
 _ROUNDING = 1e-6  # a column whose spread is below this share of its size differs by float32 rounding only
 
 
+def constant_columns(data: torch.Tensor) -> torch.Tensor:
+    """[F] bool: the columns of `data` [N, F] that are constant up to float rounding."""
+    return data.std(0) <= _ROUNDING * (1 + data.abs().amax(0))
+
+
 def column_scale(data: torch.Tensor) -> torch.Tensor:
-    """Each column's standard deviation over the rows of `data` [N, F], and 1 for a column that is constant
-    up to float rounding: its rounding noise would turn a later real difference (a simulation of the next
-    round, real data) into an input of millions."""
+    """Each column's standard deviation over the rows of `data` [N, F], and 1 for a constant column: its
+    rounding noise would turn a later real difference (a simulation of the next round, real data) into an
+    input of millions."""
     std = data.std(0)
-    constant = std <= _ROUNDING * (1 + data.abs().amax(0))
-    return torch.where(constant, torch.ones_like(std), std)
+    return torch.where(constant_columns(data), torch.ones_like(std), std)
 
 
 class Standardizer(torch.nn.Module):

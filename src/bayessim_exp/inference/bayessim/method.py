@@ -252,7 +252,7 @@ class BayesSim(InferenceMethod):
         theta, x = theta[ok], x.reshape(count, n, -1)[ok]
 
         draws = self.comp.rc.diagnostics.coverage_samples
-        products = [self._products(ctx, [model.conditional(x_i.float()) for x_i in x_set]) for x_set in x]
+        products = [self._tempered_product(ctx, [model.conditional(x_i.float()) for x_i in x_set]) for x_set in x]
 
         def levels_at(temperature: float) -> torch.Tensor:
             generator = torch.Generator().manual_seed(seed)  # the same draws' stream at every temperature
@@ -265,7 +265,7 @@ class BayesSim(InferenceMethod):
                      ctx.round, n, tau, len(theta))
         return tau, record
 
-    def _products(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
+    def _tempered_product(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
         """The posterior given trajectories' per-trajectory posteriors, combined as the product tempered to the
         temperature it is called with (their product computed once)."""
         return tempered_product(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
@@ -334,7 +334,7 @@ class BayesSim(InferenceMethod):
             return kept, [model.conditional(x_j.float()) for x_j in x[kept]]
 
         real = [model.conditional(x.float()) for x in x_real]
-        return {**local_coverage(lambda conditionals: self._products(ctx, conditionals)(tau), real, simulate,
+        return {**local_coverage(lambda conditionals: self._tempered_product(ctx, conditionals)(tau), real, simulate,
                                  d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:

@@ -2,12 +2,13 @@
 
     PYTHONPATH=src python benchmarks/round_coverage.py --jobs 3 --out /tmp/round_coverage device=cuda
     PYTHONPATH=src python benchmarks/round_coverage.py --tasks Pendulum Cartpole --jobs 2 debug=smoke   # a try
+    PYTHONPATH=src python benchmarks/round_coverage.py --tasks Pendulum --also ShadowHand_more:1 -- sim=native
 
 Runs `python -m bayessim_exp task=<task> seed=<seed> <overrides>` for every task and seed (whole runs in
 parallel processes, `--jobs` at once), then prints per task, seed and round the expected coverage of the
 50 % and 90 % HPD regions on that round's held-out simulations (diagnostics.held_out_fraction of its own,
-drawn from its proposal), the band the guard accepts for that many pairs, the held-out gain over the
-round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py, with the
+drawn from its proposal), the band the guard accepts for that many pairs, the common factor its spread
+calibration put on every standard deviation (models/spread.py), the held-out gain over the round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py, with the
 override diagnostics.local_sets=100), the smallest p-value of the real data's distance from the training
 simulations (diagnostics/extrapolation.py; the guard fails below alpha / n), the guard's action, the mismatch flag, the log-density gain at the
 surrogate's truth and the truth's HPD level (inside the 90 % region below 0.9), and the run's wall time. A
@@ -49,7 +50,7 @@ def rows(outcome: dict) -> list[str]:
 
     head = f"| {outcome['task']} | {outcome['seed']} "
     if "error" in outcome:
-        return [head + f"| failed: {outcome['error'][:150]} | | | | | | | | | | {outcome['seconds']:.0f} |"]
+        return [head + f"| failed: {outcome['error'][:150]} | | | | | | | | | | | {outcome['seconds']:.0f} |"]
     out = []
     for r in outcome["results"]["rounds"]:
         cov, held = r.get("coverage") or {}, r.get("held_out") or {}
@@ -58,8 +59,10 @@ def rows(outcome: dict) -> list[str]:
         gain, truth = r.get("log_prob_gain"), (r.get("truth") or {}).get("hpd_level")
         local = ((r.get("local_coverage") or {}).get("hpd") or {}).get("0.9")
         outside = (r.get("extrapolation") or {}).get("min_p_value")
+        joint = r.get("joint_spread")
         out.append(head + f"| {r['round']} | {hpd.get('0.5', float('nan')):.3f} | {hpd.get('0.9', float('nan')):.3f} | "
-                   f"{band[0]:.3f}-{band[1]:.3f} | {held.get('gain_over_proposal', float('nan')):+.2f} | "
+                   f"{band[0]:.3f}-{band[1]:.3f} | {'-' if joint is None else f'{joint:.2f}'} | "
+                   f"{held.get('gain_over_proposal', float('nan')):+.2f} | "
                    f"{'-' if local is None else f'{local:.2f}'} | {'-' if outside is None else f'{outside:.3f}'} | "
                    f"{r['guard']['action']} | {'yes' if r['mismatch']['flagged'] else 'no'} | "
                    f"{'null' if gain is None else f'{gain:+.2f}'} | {'-' if truth is None else f'{truth:.2f}'} | "
@@ -67,19 +70,28 @@ def rows(outcome: dict) -> list[str]:
     return out
 
 
+def _task_seed(run: str) -> tuple[str, int]:
+    task, _, seed = run.partition(":")
+    if task not in TASKS or not seed.isdigit():
+        raise SystemExit(f"--also {run!r}: expected TASK:SEED with TASK one of {', '.join(TASKS)}")
+    return task, int(seed)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tasks", nargs="+", default=TASKS, choices=TASKS)
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
+    ap.add_argument("--also", nargs="+", default=[], metavar="TASK:SEED", help="runs besides every task with every seed")
     ap.add_argument("--jobs", type=int, default=1, help="runs at once")
     ap.add_argument("--out", type=Path, default=Path("/tmp/round_coverage"))
     ap.add_argument("--json", type=Path, help="write every run's outcome here")
     ap.add_argument("overrides", nargs="*", help="added to every run (e.g. device=cuda)")
     args = ap.parse_args()
-    jobs = [(task, seed) for task in args.tasks for seed in args.seeds]
-    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | held-out gain over proposal | local 90 % "
-          "| outside p | guard | mismatch | gain at truth | truth's HPD level | run s |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    jobs = [(task, seed) for task in args.tasks for seed in args.seeds] + [_task_seed(run) for run in args.also]
+    jobs.sort(key=lambda job: TASKS.index(job[0]))  # the longest first, extra seeds with their task
+    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | spread factor | held-out gain over proposal "
+          "| local 90 % | outside p | guard | mismatch | gain at truth | truth's HPD level | run s |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
           flush=True)
     outcomes = []
     with ThreadPoolExecutor(args.jobs) as pool:

@@ -21,7 +21,7 @@
 #                runs at once (default 6), each task's sweep stopped after $SWEEP_TIMEOUT seconds; then its report,
 #                tarred into $OUT/calibration_<task>.tar.gz
 #   round_coverage  benchmarks/round_coverage.py: every task's (or $TASKS') default run, seed 0 (or $ROUND_SEEDS),
-#                device=cuda and $ROUND_ARGS (e.g. sim=native), $JOBS at once
+#                and the runs $ROUND_ALSO (TASK:SEED ...), device=cuda and $ROUND_ARGS (e.g. sim=native), $JOBS at once
 #   foreign      benchmarks/foreign_dynamics.py, 14 runs at once simulating on the CPUs, fitting on the GPU
 #   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
 #
@@ -170,7 +170,8 @@ step_calibration() {  # the jobs finished within SWEEP_TIMEOUT come back, with t
 
 step_round_coverage() {
     "$PY" benchmarks/round_coverage.py --jobs "${JOBS:-4}" --out /tmp/round_coverage --json "$OUT/round_coverage.json" \
-        ${TASKS:+--tasks $TASKS} ${ROUND_SEEDS:+--seeds $ROUND_SEEDS} -- device=cuda ${ROUND_ARGS:-}
+        ${TASKS:+--tasks $TASKS} ${ROUND_SEEDS:+--seeds $ROUND_SEEDS} ${ROUND_ALSO:+--also $ROUND_ALSO} \
+        -- device=cuda ${ROUND_ARGS:-}
 }
 
 step_foreign() {

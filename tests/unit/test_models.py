@@ -152,8 +152,9 @@ def test_nan_in_training_names_the_round_and_step(name):
 
 @pytest.mark.parametrize("name", ["mdnn", "mdrff"])
 def test_calibration_recovers_a_known_spread_factor(name):
-    """Pairs drawn from the model's own q(theta | x) give factors near 1; the same draws at twice their
-    distance from q's mean (one component: q's mean is exact), factors near 2 (sampling error ~0.03)."""
+    """Pairs drawn from the model's own q(theta | x) give, relative to the trained network, the factors its fit
+    calibrated it with; the same draws at twice their distance from q's mean (one component: q's mean is
+    exact), twice those: within 6 % on 3,000 pairs (the fixed seeds land within 4 %)."""
     model = _fit(name, gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 4000, seed=0))
     x = SIM.simulate(gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 3000, seed=7), seed=8).float()
     own = model.conditionals(x)
@@ -162,9 +163,9 @@ def test_calibration_recovers_a_known_spread_factor(name):
         theta = (mean + stretch * (draws - mean)).float()
         before = model.spread.log_scale.clone()
         model.spread.log_scale.zero_()  # factors relative to the trained network, as fit() calibrates
-        found = torch.tensor(model._calibrate(model.theta_norm(theta), model.inputs(x)))
+        found = torch.tensor(model._calibrate(model.theta_norm(theta), model.inputs(x), seed=0)["spread_scale"])
         model.spread.log_scale.copy_(before)
-        assert ((found / factor - 1).abs() < 0.1).all(), (stretch, found)
+        assert ((found / (factor * torch.exp(before)) - 1).abs() < 0.06).all(), (stretch, found, torch.exp(before))
 
 
 @pytest.mark.parametrize("name", ["mdnn", "mdrff"])

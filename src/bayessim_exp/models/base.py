@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable
 from typing import Protocol
 
+import numpy as np
 import torch
 
 from ..distributions.mixture import GaussianMixture
@@ -101,6 +102,7 @@ class StandardizedDensityModel:
     x_norm: Standardizer
     theta_norm: Standardizer
     fitted: bool = False
+    split_seed: int | None = None  # the first fit's seed: the validation split of every later fit (fine-tuning)
     projection = None
 
     def inputs(self, x: torch.Tensor) -> torch.Tensor:
@@ -111,19 +113,23 @@ class StandardizedDensityModel:
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
-    def _calibrate(self, theta_std: torch.Tensor, inputs: torch.Tensor) -> list[float]:
-        """Fit the spread of q on validation pairs (cfg.calibrate); returns the factors per parameter."""
+    def _calibrate(self, theta_std: torch.Tensor, inputs: torch.Tensor, seed: int) -> dict:
+        """Fit the spread of q on validation pairs (cfg.calibrate); returns what it found, for the history."""
         raise NotImplementedError
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
             calibration_rows: torch.Tensor | None = None) -> dict:
         """Trains where `x` lives (a GPU when the pipeline runs with device=cuda); the fitted network
         goes back to the CPU, where its state is saved and the posteriors are built. With cfg.calibrate
-        the spread is fitted on the validation pairs among `calibration_rows` (PosteriorModel.fit)."""
+        the spread is fitted on the validation pairs among `calibration_rows` (PosteriorModel.fit).
+        Fine-tuning on rows that extend the previous fit's (rounds pooled in order) keeps their roles in
+        the validation split (`validation_split`): early stopping and the calibration never read a pair
+        the network was trained on in an earlier round."""
         theta, x = theta.float().to(x.device), x.float()
         self.net.to(x.device)
         inputs = None
         if not self.fitted:  # fine-tuning keeps the first standardisation and projection, so weights stay meaningful
+            self.split_seed = seed
             torch.manual_seed(seed)
             self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
             self.x_norm.fit(x)
@@ -135,35 +141,36 @@ class StandardizedDensityModel:
                 with torch.no_grad():
                     inputs = self.inputs(x)
             theta_std = self.theta_norm(theta)
-            history = train_density(self.net, self._nll, theta_std, inputs, self.cfg,
+            val_idx, train_idx = validation_split(len(theta), self.cfg.val_fraction, self.split_seed, label)
+            history = train_density(self.net, self._nll, theta_std, inputs, val_idx, train_idx, self.cfg,
                                     seed=seed, label=label, on_epoch=on_epoch)
             if self.cfg.calibrate:  # fine-tuning starts from the network's own spread, not the last factors
                 self.spread.log_scale.zero_()
-                val_idx = calibration_pairs(validation_split(len(theta), self.cfg.val_fraction, seed, label)[0],
-                                            calibration_rows).to(x.device)
+                val_idx = calibration_pairs(val_idx, calibration_rows).to(x.device)
                 if len(val_idx):
-                    history["spread_scale"] = self._calibrate(theta_std[val_idx], inputs[val_idx])
+                    history.update(self._calibrate(theta_std[val_idx], inputs[val_idx], seed))
         finally:
             self.net.to("cpu")
         self.fitted = True
         return history
 
     def state_dict(self) -> dict:
-        return {"net": self.net.state_dict(), "fitted": self.fitted}
+        return {"net": self.net.state_dict(), "fitted": self.fitted, "split_seed": self.split_seed}
 
     def load_state_dict(self, state: dict) -> None:
         self.net.load_state_dict(state["net"])
-        self.fitted = state["fitted"]
+        self.fitted, self.split_seed = state["fitted"], state["split_seed"]
 
 
-def validation_split(n: int, val_fraction: float, seed: int, label: str) -> tuple[torch.Tensor, torch.Tensor, torch.Generator]:
-    """(validation indices, training indices, the generator that drew them, for the epochs' orders)."""
-    g = torch.Generator().manual_seed(seed)
-    n_val = max(1, int(round(val_fraction * n)))
-    if n - n_val < 2:
+def validation_split(n: int, val_fraction: float, seed: int, label: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """(validation indices, training indices): row i validates iff the i-th uniform of `seed`'s stream lies
+    below val_fraction (at least one row does), so rows keep their role when later fits append rows."""
+    draws = torch.from_numpy(np.random.default_rng(seed).random(n))
+    validates = draws < val_fraction
+    validates[draws.argmin()] = True
+    if n - int(validates.sum()) < 2:
         raise TrainingError(f"{label}: {n} simulations are too few to train on")
-    perm = torch.randperm(n, generator=g)
-    return perm[:n_val], perm[n_val:], g
+    return validates.nonzero()[:, 0], (~validates).nonzero()[:, 0]
 
 
 def calibration_pairs(val_idx: torch.Tensor, calibration_rows: torch.Tensor | None) -> torch.Tensor:
@@ -176,13 +183,16 @@ def train_density(
     nll: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
     theta: torch.Tensor,
     x: torch.Tensor,
+    val_idx: torch.Tensor,
+    train_idx: torch.Tensor,
     cfg: TrainConfig,
     *,
     seed: int,
     label: str,
     on_epoch: Callable[[int, float, float], None] | None = None,
 ) -> dict:
-    """Minimise mean nll(theta_batch, x_batch) with Adam and early stopping on a held-out split.
+    """Minimise mean nll(theta_batch, x_batch) over the rows `train_idx` with Adam (in orders shuffled by
+    `seed`) and early stopping on the rows `val_idx`.
 
     Restores the parameters of the best validation epoch. Raises TrainingError naming `label`
     and the step when the loss or a gradient becomes non-finite. On a GPU the optimisation step is
@@ -190,7 +200,7 @@ def train_density(
     """
     from tqdm.auto import tqdm
 
-    val_idx, train_idx, g = validation_split(theta.shape[0], cfg.val_fraction, seed, label)
+    g = torch.Generator().manual_seed(seed)
     val_idx = val_idx.to(theta.device)
     steps = adam_steps(net, nll, theta, x, cfg, label, len(train_idx))
     best, best_state, since_best = math.inf, None, 0

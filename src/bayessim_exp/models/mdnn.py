@@ -12,6 +12,7 @@ average, itself a Gaussian mixture (docs/statistics.md: averaging corrects overc
 component (in standardised units), fitted by maximum likelihood on the validation split. A network
 stopped early is over- or under-dispersed, by different amounts per parameter; rescaling is
 temperature scaling (Guo et al. 2017) per output, and it can only raise the validation likelihood.
+Then one common factor >= 1 that calibrates the joint HPD regions on the same pairs (models/spread.py).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
 from .mixture_nll import LOG_DIAGONAL_BOUND, HeadNLL, mixture_nll
 from .projection import RidgeProjection
+from .spread import JOINT_ROWS, SpreadScale, joint_factor
 
 _CALIBRATION_ROWS = 4096  # validation pairs the spread is fitted on (plenty for one factor per parameter)
 _CALIBRATION_CHUNK = 512  # pairs per pass: dense precision factors of 100-parameter mixtures are large
@@ -97,18 +99,6 @@ class MixtureHead(nn.Module):
         return HeadNLL.apply(self.out(h), theta, self.upper_rows, self.upper_cols, self.k)
 
 
-class SpreadScale(nn.Module):
-    """log of the factors on q's standard deviations per standardised parameter (0: as trained)."""
-
-    def __init__(self, dim: int):
-        super().__init__()
-        self.register_buffer("log_scale", torch.zeros(dim))
-
-    def scale_factors(self, U: torch.Tensor, log_scale: torch.Tensor | None = None) -> torch.Tensor:
-        """Precision factors of the rescaled components: U diag(1 / scale), still upper triangular."""
-        return U * torch.exp(-(self.log_scale if log_scale is None else log_scale))
-
-
 class MDNN(StandardizedDensityModel):
     """`embedding` (optional): a trainable module in front of the network, trained jointly
     (learned summaries); it maps standardised summaries [N, x_dim] to features [N, E]."""
@@ -147,7 +137,7 @@ class MDNN(StandardizedDensityModel):
         log_w = torch.cat([torch.log_softmax(lg, -1) for lg, _, _ in parts], -1) - math.log(len(parts))
         return log_w, torch.cat([mu for _, mu, _ in parts], 1), torch.cat([u for _, _, u in parts], 1)
 
-    def _calibrate(self, theta_std: torch.Tensor, inputs: torch.Tensor) -> list[float]:
+    def _calibrate(self, theta_std: torch.Tensor, inputs: torch.Tensor, seed: int) -> dict:
         self.net.eval()
         rows = torch.arange(min(len(theta_std), _CALIBRATION_ROWS), device=theta_std.device).split(_CALIBRATION_CHUNK)
         with torch.no_grad():  # the network is fixed: its outputs once, the factors by L-BFGS on them
@@ -169,7 +159,14 @@ class MDNN(StandardizedDensityModel):
         log_scale = torch.as_tensor(found.x, dtype=torch.float32)
         if torch.isfinite(log_scale).all():  # else keep the network's own spread
             self.spread.log_scale.copy_(log_scale)
-        return torch.exp(self.spread.log_scale).tolist()
+        with torch.no_grad():
+            # the chunks that hold the first JOINT_ROWS pairs (dense factors of all 4,096 are gigabytes)
+            first = outputs[:math.ceil(JOINT_ROWS / _CALIBRATION_CHUNK)]
+            theta, log_w, means, U = (torch.cat(part) for part in zip(*first))
+            joint = joint_factor(log_w, means, self.spread.scale_factors(U), theta,
+                                 diagonal=self.cfg.covariance == "diagonal", seed=seed)
+        self.spread.log_scale.add_(math.log(joint))
+        return {"spread_scale": torch.exp(self.spread.log_scale).tolist(), "joint_spread": joint}
 
     @torch.no_grad()
     def conditionals(self, x: torch.Tensor) -> MixtureBatch:

@@ -21,7 +21,8 @@ from torch import nn
 from ..errors import ConfigError
 from ..registry import register
 from .base import Standardizer, TrainConfig
-from .mdnn import ACTIVATIONS, MDNN, MixtureHead, SpreadScale, input_projection
+from .mdnn import ACTIVATIONS, MDNN, MixtureHead, input_projection
+from .spread import SpreadScale
 
 # kernel name -> degrees of freedom of the Student-t spectral density (None: Gaussian, the RBF)
 KERNELS = {"rbf": None, "matern12": 1.0, "matern32": 3.0, "matern52": 5.0}

@@ -401,6 +401,7 @@ class BayesSim(InferenceMethod):
             "epochs": hist["epochs"],
             "train_loss": hist["train"][-1],
             "val_loss": hist["best_val"],
+            "joint_spread": hist.get("joint_spread"),  # the common factor on the spread (models/spread.py)
             "proposal": self.proposal_name(ctx),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],

@@ -87,7 +87,7 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="write every run's outcome here")
     ap.add_argument("overrides", nargs="*", help="added to every run (e.g. device=cuda)")
     args = ap.parse_args()
-    jobs = [(task, seed) for task in args.tasks for seed in args.seeds] + [_task_seed(run) for run in args.also]
+    jobs = [(task, seed) for task in args.tasks for seed in args.seeds] + [_task_seed(extra) for extra in args.also]
     jobs.sort(key=lambda job: TASKS.index(job[0]))  # the longest first, extra seeds with their task
     print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | spread factor | held-out gain over proposal "
           "| local 90 % | outside p | guard | mismatch | gain at truth | truth's HPD level | run s |\n"

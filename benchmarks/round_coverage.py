@@ -8,7 +8,8 @@ Runs `python -m bayessim_exp task=<task> seed=<seed> <overrides>` for every task
 parallel processes, `--jobs` at once), then prints per task, seed and round the expected coverage of the
 50 % and 90 % HPD regions on that round's held-out simulations (diagnostics.held_out_fraction of its own,
 drawn from its proposal), the band the guard accepts for that many pairs, the common factor its spread
-calibration put on every standard deviation (models/spread.py), the held-out gain over the round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py, with the
+calibration put on every standard deviation (models/spread.py) with the shares its validation pairs' 50 % and
+90 % regions held before it, the held-out gain over the round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py, with the
 override diagnostics.local_sets=100), the smallest p-value of the real data's distance from the training
 simulations (diagnostics/extrapolation.py; the guard fails below alpha / n), the guard's action, the mismatch flag, the log-density gain at the
 surrogate's truth and the truth's HPD level (inside the 90 % region below 0.9), and the run's wall time. A
@@ -60,8 +61,10 @@ def rows(outcome: dict) -> list[str]:
         local = ((r.get("local_coverage") or {}).get("hpd") or {}).get("0.9")
         outside = (r.get("extrapolation") or {}).get("min_p_value")
         joint = r.get("joint_spread")
+        spread = "-" if joint is None else \
+            f"{joint['factor']:.2f} ({joint['inside_unscaled']['0.5']:.2f} / {joint['inside_unscaled']['0.9']:.2f})"
         out.append(head + f"| {r['round']} | {hpd.get('0.5', float('nan')):.3f} | {hpd.get('0.9', float('nan')):.3f} | "
-                   f"{band[0]:.3f}-{band[1]:.3f} | {'-' if joint is None else f'{joint:.2f}'} | "
+                   f"{band[0]:.3f}-{band[1]:.3f} | {spread} | "
                    f"{held.get('gain_over_proposal', float('nan')):+.2f} | "
                    f"{'-' if local is None else f'{local:.2f}'} | {'-' if outside is None else f'{outside:.3f}'} | "
                    f"{r['guard']['action']} | {'yes' if r['mismatch']['flagged'] else 'no'} | "
@@ -89,7 +92,8 @@ def main() -> None:
     args = ap.parse_args()
     jobs = [(task, seed) for task in args.tasks for seed in args.seeds] + [_task_seed(extra) for extra in args.also]
     jobs.sort(key=lambda job: TASKS.index(job[0]))  # the longest first, extra seeds with their task
-    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | spread factor | held-out gain over proposal "
+    print("| task | seed | round | HPD 50 % | HPD 90 % | band (90 %) | spread factor (validation 50 % / 90 % at 1) "
+          "| held-out gain over proposal "
           "| local 90 % | outside p | guard | mismatch | gain at truth | truth's HPD level | run s |\n"
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
           flush=True)

@@ -8,8 +8,7 @@ from bayessim_exp.diagnostics.scoring import hpd_level
 from bayessim_exp.distributions.independent import GaussianPrior
 from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.inference.bayessim.correction import posterior
-from bayessim_exp.inference.bayessim.set_calibration import product_temperature
-from bayessim_exp.models.spread import miscalibration
+from bayessim_exp.inference.bayessim.set_calibration import miscalibration, product_temperature
 
 NOISE = 0.5  # x = theta + N(0, NOISE^2) in one dimension, theta ~ N(0, 1)
 PRIOR = GaussianPrior(torch.zeros(1, dtype=torch.float64), torch.ones(1, dtype=torch.float64))

@@ -163,10 +163,11 @@ class MDNN(StandardizedDensityModel):
             # the chunks that hold the first JOINT_ROWS pairs (dense factors of all 4,096 are gigabytes)
             first = outputs[:math.ceil(JOINT_ROWS / _CALIBRATION_CHUNK)]
             theta, log_w, means, U = (torch.cat(part) for part in zip(*first))
-            joint = joint_factor(log_w, means, self.spread.scale_factors(U), theta,
-                                 diagonal=self.cfg.covariance == "diagonal", seed=seed)
+            joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta,
+                                         diagonal=self.cfg.covariance == "diagonal", seed=seed)
         self.spread.log_scale.add_(math.log(joint))
-        return {"spread_scale": torch.exp(self.spread.log_scale).tolist(), "joint_spread": joint}
+        return {"spread_scale": torch.exp(self.spread.log_scale).tolist(),
+                "joint_spread": {"factor": joint, **record}}
 
     @torch.no_grad()
     def conditionals(self, x: torch.Tensor) -> MixtureBatch:

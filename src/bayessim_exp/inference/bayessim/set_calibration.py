@@ -26,10 +26,17 @@ from collections.abc import Callable, Sequence
 import torch
 
 from ...diagnostics.scoring import shares_inside
-from ...models.spread import miscalibration
 
 COARSE = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
 _FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the best coarse one
+
+
+def miscalibration(levels_of_sets: torch.Tensor, levels: Sequence[float]) -> float:
+    """Sum over `levels` L of ((share of sets whose HPD level is below L) - L)^2 / (L (1 - L) / sets): a
+    chi-square-like distance from calibration, each level's deviation in its own binomial standard errors."""
+    k = len(levels_of_sets)
+    return sum(float((levels_of_sets < level).double().mean() - level) ** 2 / (level * (1 - level) / k)
+               for level in levels)
 
 
 def product_temperature(levels_at: Callable[[float], torch.Tensor], levels: Sequence[float]) -> tuple[float, dict]:

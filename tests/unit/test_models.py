@@ -205,3 +205,21 @@ def test_fine_tuning_on_a_round_where_a_constant_summary_varies(name):
     varied[17] += 0.582
     model.fit(theta, torch.cat([x, varied], 1), seed=0, label="round 2")
     assert model.inputs(torch.cat([x, varied], 1)).abs().max() < 100
+
+
+def test_the_common_factor_multiplies_every_parameters_spread(monkeypatch):
+    """MDNN's calibration applies models/spread.py's common factor on top of the per-parameter ones: the same
+    pairs calibrated with a factor of 1 and of 1.5 give spreads 1.5 times apart and covariances 2.25 times."""
+    from bayessim_exp.models import mdnn
+
+    model = _fit("mdnn", gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 2000, seed=0))
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 500, seed=3)
+    x = SIM.simulate(theta, seed=4).float()
+    found, covariances = {}, {}
+    for factor in (1.0, 1.5):
+        monkeypatch.setattr(mdnn, "joint_factor", lambda *args, factor=factor, **kwargs: (factor, {}))
+        found[factor] = torch.tensor(model._calibrate(model.theta_norm(theta.float()), model.inputs(x), seed=0)
+                                     ["spread_scale"])
+        covariances[factor] = model.conditional(x[0]).covariance
+    assert torch.allclose(found[1.5], 1.5 * found[1.0], rtol=1e-5)
+    assert torch.allclose(covariances[1.5], 2.25 * covariances[1.0], rtol=1e-4)

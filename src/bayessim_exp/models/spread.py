@@ -3,17 +3,17 @@
 1. One factor per parameter on every component's standard deviations, by maximum likelihood (models/mdnn.py):
    temperature scaling per output (Guo et al. 2017). It sets each parameter's marginal.
 2. One common factor, at least 1, on all of them, set by where the pairs' own parameters lie in their HPD
-   regions (`joint_factor`): the smallest at which the 50 % and 90 % regions hold their share of the pairs, up to
-   one binomial standard error (a calibrated model is not widened for its pairs' chance shortfall). It sets
-   the joint. In D dimensions the level-L HPD region of a Gaussian holds
-   theta iff a squared distance with mean D and spread sqrt(2 D) lies below its L quantile. A few per cent
-   too little spread in every direction, which the marginals hardly show, empties the joint regions: in 102
-   dimensions 2 % moves the 50 % region's share by 0.10. ShadowHand_more's later rounds (docs/statistics.md)
-   held 0.17-0.43 of their held-out parameters in the 50 % regions and 0.78-0.84 in the 90 % ones, while
-   every parameter's central intervals covered 0.48-0.51 and 0.88-0.90.
+   regions (`joint_factor`): the smallest at which the 50 % and 90 % regions hold their share of the pairs, up
+   to one binomial standard error (a calibrated model is not widened for its pairs' chance shortfall). It sets
+   the joint. In D dimensions the level-L HPD region of a Gaussian holds theta iff a squared distance with
+   mean D and spread sqrt(2 D) lies below its L quantile. A few per cent too little spread in every direction,
+   which the marginals hardly show, empties the joint regions: in 102 dimensions 2 % moves the 50 % region's
+   share by 0.10. ShadowHand_more's later rounds (docs/statistics.md) held 0.17-0.43 of their held-out
+   parameters in the 50 % regions and 0.78-0.84 in the 90 % ones, while every parameter's central intervals
+   covered 0.48-0.51 and 0.88-0.90.
    One factor cannot fix the regions' shape. Where the tails are too light and the core about right (held-out
-   shares like 0.52 / 0.84), it is set by the 90 % region and leaves the 50 % one a little wide: an
-   underconfident region is a finding, an overconfident one a failure (diagnostics/guard.py).
+   shares like 0.52 / 0.84), the 90 % region sets it and the 50 % one is left a little wide: an underconfident
+   region is a finding, an overconfident one a failure (diagnostics/guard.py).
 """
 
 from __future__ import annotations

@@ -84,6 +84,21 @@ def test_state_dict_round_trip(fitted):
     torch.testing.assert_close(clone.conditional(x).log_prob(theta), model.conditional(x).log_prob(theta))
 
 
+def test_a_state_saved_before_split_seeds_were_kept_loads_and_fine_tunes(fitted):
+    """Posterior files and run directories written before the split seed was part of a model's state load
+    unchanged and fine-tune, splitting with the new fit's seed."""
+    name, model = fitted
+    state = {k: v for k, v in model.state_dict().items() if k != "split_seed"}
+    clone = build("model", {"name": name, **CONFIGS[name], "max_epochs": 2}, theta_dim=2, x_dim=3)
+    clone.load_state_dict(state)
+    x = SIM.simulate(TRUE_THETAS[:1], seed=11)[0]
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 50, seed=3)
+    torch.testing.assert_close(clone.conditional(x).log_prob(theta), model.conditional(x).log_prob(theta))
+    more = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 300, seed=5)
+    clone.fit(more, SIM.simulate(more, seed=6), seed=7, label="round 2")
+    assert clone.split_seed == 7
+
+
 def test_several_observations_with_a_trained_mdnn():
     model = _fit("mdnn", gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 4000, seed=0))
     xs = SIM.simulate(TRUE_THETAS[:1].expand(4, 2), seed=12)

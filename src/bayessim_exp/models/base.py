@@ -128,8 +128,9 @@ class StandardizedDensityModel:
         theta, x = theta.float().to(x.device), x.float()
         self.net.to(x.device)
         inputs = None
-        if not self.fitted:  # fine-tuning keeps the first standardisation and projection, so weights stay meaningful
+        if not self.fitted or self.split_seed is None:  # or a state saved before split seeds were kept
             self.split_seed = seed
+        if not self.fitted:  # fine-tuning keeps the first standardisation and projection, so weights stay meaningful
             torch.manual_seed(seed)
             self.net.apply(lambda m: m.reset_parameters() if hasattr(m, "reset_parameters") else None)
             self.x_norm.fit(x)
@@ -159,7 +160,7 @@ class StandardizedDensityModel:
 
     def load_state_dict(self, state: dict) -> None:
         self.net.load_state_dict(state["net"])
-        self.fitted, self.split_seed = state["fitted"], state["split_seed"]
+        self.fitted, self.split_seed = state["fitted"], state.get("split_seed")  # absent from states saved earlier
 
 
 def validation_split(n: int, val_fraction: float, seed: int, label: str) -> tuple[torch.Tensor, torch.Tensor]:

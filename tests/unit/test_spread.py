@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from bayessim_exp.models import base
-from bayessim_exp.models.spread import joint_factor
+from bayessim_exp.models.spread import joint_factor, member_shares
 
 PAIRS, D = 1000, 40
 
@@ -92,3 +92,20 @@ def test_fine_tuning_splits_with_the_first_fits_seed(monkeypatch):
     second.load_state_dict(first.state_dict())
     second.fit(theta, x, seed=12, label="round 2")
     assert torch.equal(splits[1][splits[1] < 300], splits[0])
+
+
+def test_a_narrow_wrong_member_is_told_apart_from_calibrated_ones():
+    """Three members: two exact, one a third as wide and shifted by 2 along every whitened axis of the exact one.
+    The ensemble needs widening (the narrow member's draws are denser than every theta); per member, the exact
+    ones hold about their share and the narrow one none."""
+    log_w, means, U, theta = _mixtures(1, True, seed=6)
+    root = torch.linalg.inv(U[:, 0])  # U^-1 U^-T is the covariance
+    shift = (root @ torch.full((D, 1), 2.0))[..., 0]
+    members = (torch.zeros(PAIRS, 3), torch.cat([means, means, means + shift[:, None]], 1),
+               torch.cat([U, U, 3 * U], 1))
+    ensemble, _ = joint_factor(*members, theta, diagonal=False, seed=0)
+    shares = member_shares(*members, theta, 3, diagonal=False, seed=0)
+    assert ensemble > 1.05, ensemble
+    for exact in shares[:2]:
+        assert abs(exact["0.5"] - 0.5) < 0.05 and abs(exact["0.9"] - 0.9) < 0.03, shares
+    assert shares[2]["0.9"] < 0.05, shares

@@ -31,7 +31,7 @@ from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
 from .mixture_nll import LOG_DIAGONAL_BOUND, HeadNLL, mixture_nll
 from .projection import RidgeProjection
-from .spread import JOINT_ROWS, SpreadScale, joint_factor
+from .spread import JOINT_ROWS, SpreadScale, joint_factor, member_shares
 
 _CALIBRATION_ROWS = 4096  # validation pairs the spread is fitted on (plenty for one factor per parameter)
 _CALIBRATION_CHUNK = 512  # pairs per pass: dense precision factors of 100-parameter mixtures are large
@@ -163,9 +163,12 @@ class MDNN(StandardizedDensityModel):
             # the chunks that hold the first JOINT_ROWS pairs (dense factors of all 4,096 are gigabytes)
             first = outputs[:math.ceil(JOINT_ROWS / _CALIBRATION_CHUNK)]
             theta, log_w, means, U = (torch.cat(part) for part in zip(*first))
-            joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta,
-                                         diagonal=self.cfg.covariance == "diagonal", seed=seed)
-        self.spread.log_scale.add_(math.log(joint))
+            diagonal = self.cfg.covariance == "diagonal"
+            joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta, diagonal=diagonal, seed=seed)
+            self.spread.log_scale.add_(math.log(joint))
+            if len(self.members) > 1:
+                record["members_inside"] = member_shares(log_w, means, self.spread.scale_factors(U), theta,
+                                                         len(self.members), diagonal=diagonal, seed=seed)
         return {"spread_scale": torch.exp(self.spread.log_scale).tolist(),
                 "joint_spread": {"factor": joint, **record}}
 

@@ -63,6 +63,25 @@ def joint_factor(log_weights: torch.Tensor, means: torch.Tensor, factors: torch.
     return c, {"pairs": count, "inside_unscaled": first, "inside": inside}
 
 
+@torch.no_grad()
+def member_shares(log_weights: torch.Tensor, means: torch.Tensor, factors: torch.Tensor, theta: torch.Tensor,
+                  members: int, *, diagonal: bool, seed: int) -> list[dict[str, float]]:
+    """Per member of an ensemble, whose mixture is its members' mixtures side by side (equal blocks of components,
+    as joint_factor takes them): the shares of the theta_n inside that member's own HPD regions at JOINT_LEVELS
+    (its components alone, their weights renormalised). A member far narrower than the others, wrong, puts its
+    weight's share of the ensemble's draws above the density of every theta it misses, a shape no common factor
+    repairs (ShadowHand_more, docs/statistics.md); this tells such a member apart."""
+    rows = slice(0, min(len(theta), JOINT_ROWS))
+    shares = []
+    for block in torch.arange(means.shape[1], device=means.device).chunk(members):
+        terms = _quadratic_terms(torch.log_softmax(log_weights[rows][:, block].float(), -1),
+                                 means[rows][:, block].float(), factors[rows][:, block].float(), theta[rows].float(),
+                                 diagonal, seed)
+        levels_of = _levels_at(1.0, *terms)
+        shares.append({f"{level:g}": float((levels_of < level).double().mean()) for level in JOINT_LEVELS})
+    return shares
+
+
 def _quadratic_terms(log_w, means, U, theta, diagonal: bool, seed: int) -> tuple[torch.Tensor, ...]:
     """What the HPD levels at every factor c are computed from. A draw y = mu_k + c U_k^-1 eps of component k,
     seen from component m: U_m (y - mu_m) / c = a / c + b with a = U_m (mu_k - mu_m), b = U_m U_k^-1 eps, so

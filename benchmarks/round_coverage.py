@@ -9,11 +9,12 @@ parallel processes, `--jobs` at once), then prints per task, seed and round the 
 50 % and 90 % HPD regions on that round's held-out simulations (diagnostics.held_out_fraction of its own,
 drawn from its proposal), the band the guard accepts for that many pairs, the common factor its spread
 calibration put on every standard deviation (models/spread.py) with the shares its validation pairs' 50 % and
-90 % regions held before it, the held-out gain over the round's proposal, the coverage of 90 % regions near the real data (diagnostics/local_coverage.py, with the
-override diagnostics.local_sets=100), the smallest p-value of the real data's distance from the training
-simulations (diagnostics/extrapolation.py; the guard fails below alpha / n), the guard's action, the mismatch flag, the log-density gain at the
-surrogate's truth and the truth's HPD level (inside the 90 % region below 0.9), and the run's wall time. A
-run that fails is listed with its last error line.
+90 % regions held before it, the held-out gain over the round's proposal, the coverage of 90 % regions near the
+real data (diagnostics/local_coverage.py, with the override diagnostics.local_sets=100), the smallest p-value of
+the real data's distance from the training simulations (diagnostics/extrapolation.py; the guard fails below
+alpha / n), the guard's action, the mismatch flag, the log-density gain at the surrogate's truth and the
+truth's HPD level (inside the 90 % region below 0.9), and the run's wall time. A run that fails is listed with
+its last error line.
 """
 
 from __future__ import annotations

@@ -160,9 +160,9 @@ class MDNN(StandardizedDensityModel):
         if torch.isfinite(log_scale).all():  # else keep the network's own spread
             self.spread.log_scale.copy_(log_scale)
         with torch.no_grad():
-            # the chunks that hold the first JOINT_ROWS pairs (dense factors of all 4,096 are gigabytes)
+            # the first JOINT_ROWS pairs, from the chunks that hold them (dense factors of all 4,096 are gigabytes)
             first = outputs[:math.ceil(JOINT_ROWS / _CALIBRATION_CHUNK)]
-            theta, log_w, means, U = (torch.cat(part) for part in zip(*first))
+            theta, log_w, means, U = (torch.cat(part)[:JOINT_ROWS] for part in zip(*first))
             diagonal = self.cfg.covariance == "diagonal"
             joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta, diagonal=diagonal, seed=seed)
             self.spread.log_scale.add_(math.log(joint))

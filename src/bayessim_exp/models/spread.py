@@ -23,8 +23,10 @@ import math
 import torch
 from torch import nn
 
+from ..diagnostics.scoring import shares_inside
+
 JOINT_LEVELS = (0.5, 0.9)  # the regions the common factor calibrates (those the guard and the studies read)
-JOINT_ROWS = 1000  # validation pairs it is fitted on: a share's standard error at 90 % is then 0.01
+JOINT_ROWS = 1000  # validation pairs to fit it on (the caller's cut): a share's standard error at 90 % is 0.01
 _JOINT_DRAWS = 500  # posterior draws per pair that place its parameters in their HPD region
 _FACTORS = 1.01 ** torch.arange(140)  # tried in steps of 1 %, 1 up to 4
 _CHUNK_ELEMENTS = 1 << 24  # numbers held per chunk of pairs (draws x components x parameters)
@@ -48,19 +50,16 @@ def joint_factor(log_weights: torch.Tensor, means: torch.Tensor, factors: torch.
     """(c, record): the smallest common factor c >= 1 on the standard deviations of the mixtures q_n (log
     weights [N, M], means [N, M, D], upper-triangular precision factors [N, M, D, D], diagonal ones where
     `diagonal`), in steps of 1 % up to 4, whose level-L HPD regions hold the share L of the theta_n [N, D] less
-    one binomial standard error at every L of JOINT_LEVELS; the record has the shares at 1 and at c. The first
-    JOINT_ROWS pairs, _JOINT_DRAWS draws each, the same draws at every c."""
-    rows = slice(0, min(len(theta), JOINT_ROWS))
-    terms = _quadratic_terms(log_weights[rows].float(), means[rows].float(), factors[rows].float(),
-                             theta[rows].float(), diagonal, seed)
-    count = len(terms[0])
-    first = None
+    one binomial standard error at every L of JOINT_LEVELS; the record has the shares at 1 and at c.
+    _JOINT_DRAWS draws per pair, the same draws at every c."""
+    terms = _quadratic_terms(log_weights.float(), means.float(), factors.float(), theta.float(), diagonal, seed)
+    count = len(theta)
+    unscaled = shares_inside(_levels_at(1.0, *terms), JOINT_LEVELS)
     for c in _FACTORS.tolist():
-        inside = {f"{level:g}": float((_levels_at(c, *terms) < level).double().mean()) for level in JOINT_LEVELS}
-        first = first or inside
+        inside = unscaled if c == 1.0 else shares_inside(_levels_at(c, *terms), JOINT_LEVELS)
         if all(inside[f"{level:g}"] >= level - math.sqrt(level * (1 - level) / count) for level in JOINT_LEVELS):
             break
-    return c, {"pairs": count, "inside_unscaled": first, "inside": inside}
+    return c, {"pairs": count, "inside_unscaled": unscaled, "inside": inside}
 
 
 @torch.no_grad()
@@ -71,14 +70,11 @@ def member_shares(log_weights: torch.Tensor, means: torch.Tensor, factors: torch
     (its components alone, their weights renormalised). A member far narrower than the others, wrong, puts its
     weight's share of the ensemble's draws above the density of every theta it misses, a shape no common factor
     repairs (ShadowHand_more, docs/statistics.md); this tells such a member apart."""
-    rows = slice(0, min(len(theta), JOINT_ROWS))
     shares = []
     for block in torch.arange(means.shape[1], device=means.device).chunk(members):
-        terms = _quadratic_terms(torch.log_softmax(log_weights[rows][:, block].float(), -1),
-                                 means[rows][:, block].float(), factors[rows][:, block].float(), theta[rows].float(),
-                                 diagonal, seed)
-        levels_of = _levels_at(1.0, *terms)
-        shares.append({f"{level:g}": float((levels_of < level).double().mean()) for level in JOINT_LEVELS})
+        terms = _quadratic_terms(torch.log_softmax(log_weights[:, block].float(), -1), means[:, block].float(),
+                                 factors[:, block].float(), theta.float(), diagonal, seed)
+        shares.append(shares_inside(_levels_at(1.0, *terms), JOINT_LEVELS))
     return shares
 
 

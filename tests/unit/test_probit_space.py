@@ -133,3 +133,25 @@ def test_components_wider_than_the_prior_are_narrowed_to_it_keeping_the_closed_f
     mean = torch.linalg.solve(precision, torch.linalg.inv(narrowed) @ torch.tensor([0.1, 0.6], dtype=torch.float64))
     assert torch.allclose(post.covariance, torch.linalg.inv(precision), atol=1e-9)
     assert torch.allclose(post.mean, mean, atol=1e-9)
+
+
+def test_a_product_double_precision_cannot_hold_falls_back_to_the_narrowed_conditionals():
+    """Far outside its training summaries a density model can return components of variance 4e14 beside a
+    near-degenerate one (a pendulum logged 0.3 rad off, round 2): their product's covariance does not
+    factorise even with jitter. The posterior then takes the conditionals narrowed to the prior, as for any
+    component wider than it, instead of stopping the run."""
+    from bayessim_exp.distributions.mixture import NotPositiveDefinite
+    from bayessim_exp.inference.bayessim.correction import loewner_min, posterior
+
+    # that run's two components, to the digits their product needs to fail (with 8 it factorises)
+    flat = GaussianMixture(torch.zeros(1), torch.tensor([[-12.93, 0.99]]), torch.tensor(
+        [[[425606165200000.0, -133194096100.0], [-133194096100.0, 41683294.78]]], dtype=torch.float64))
+    sharp = GaussianMixture(torch.zeros(1), torch.tensor([[-17.35, -1.58]]), torch.tensor(
+        [[[8.666749547e-10, -5.4803049e-06], [-5.4803049e-06, 0.03768767154]]], dtype=torch.float64))
+    with pytest.raises(NotPositiveDefinite):
+        flat.product(sharp)
+    eye = torch.eye(2, dtype=torch.float64)
+    narrowed = [GaussianMixture(q.log_weights, q.means, loewner_min(q.covs, eye)) for q in (flat, sharp)]
+    post, expected = posterior([flat, sharp], standard_normal_prior(2)), posterior(narrowed, standard_normal_prior(2))
+    assert isinstance(post, GaussianMixture)
+    assert torch.allclose(post.mean, expected.mean) and torch.allclose(post.covariance, expected.covariance)

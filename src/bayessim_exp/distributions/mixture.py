@@ -23,6 +23,10 @@ _LOG_2PI = math.log(2 * math.pi)
 _JITTER = (1e-12, 1e-10, 1e-8, 1e-6, 1e-4)
 
 
+class NotPositiveDefinite(ValueError):
+    """A covariance double precision cannot factorise, jitter included (variances 1e14 beside 1e-10)."""
+
+
 def _cholesky(covs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(covs, lower Cholesky factors), adding the smallest relative jitter that makes them factorise."""
     if not torch.isfinite(covs).all():
@@ -39,7 +43,7 @@ def _cholesky(covs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
             log.warning("%d mixture covariance(s) not positive definite by rounding; added %.0e of their diagonal",
                         failed, eps)
             return fixed, factor
-    raise ValueError("a mixture component's covariance is not positive definite, even with jitter")
+    raise NotPositiveDefinite("a mixture component's covariance is not positive definite, even with jitter")
 
 
 class MixtureBatch:

@@ -28,7 +28,7 @@ import torch
 from ...distributions.base import ParameterDistribution
 from ...distributions.importance import DefensiveMixture, ImportancePosterior
 from ...distributions.independent import BoxUniform, GaussianPrior
-from ...distributions.mixture import GaussianMixture, TruncatedMixture
+from ...distributions.mixture import GaussianMixture, NotPositiveDefinite, TruncatedMixture
 from ...distributions.restricted import Restricted
 from ...distributions.truncated_prior import TruncatedPrior
 
@@ -163,11 +163,16 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
     prior_factor = _gaussian_factor(prior)
 
     @functools.cache
-    def product(narrowed: bool) -> GaussianMixture:
+    def product(narrowed: bool) -> GaussianMixture | None:
         # a component wider than a Gaussian prior is a fitting artefact (no posterior of a Gaussian prior is);
-        # dividing by the prior then leaves a negative precision: `narrowed` clamps it to the prior's
+        # dividing by the prior then leaves a negative precision, and far wider ones (a model far outside its
+        # training summaries: variances of 1e14) leave products double precision cannot factorise (None):
+        # `narrowed` clamps them to the prior's
         factors = [_no_wider_than(q, prior_factor[1]) for q in conditionals] if narrowed else conditionals
-        return _product(factors, max_components)
+        try:
+            return _product(factors, max_components)
+        except NotPositiveDefinite:
+            return None
 
     @functools.cache
     def moment_product() -> GaussianMixture:
@@ -188,7 +193,7 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
                     log.info("posterior: components wider than the prior narrowed to it, keeping the closed form")
             if result is not None:
                 return result if box is None else TruncatedMixture(result, *box, seed=seed)
-            reason = "a component's corrected precision is not positive definite"
+            reason = "the product or a component's corrected precision is not positive definite"
         elif n == 1 and prior_power == 0 and not corrected:
             q = conditionals[0]  # a flow trained on prior draws: its density is the posterior up to the support
             return q if box is None else Restricted(q, *box, seed=seed)
@@ -204,9 +209,11 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
     return at
 
 
-def _closed_form(product: GaussianMixture, tau: float, lam, eta) -> GaussianMixture | None:
-    """The conditionals' product raised to tau, times exp(-theta^T lam theta / 2 + eta^T theta); None where a
-    corrected precision is not positive definite."""
+def _closed_form(product: GaussianMixture | None, tau: float, lam, eta) -> GaussianMixture | None:
+    """The conditionals' product raised to tau, times exp(-theta^T lam theta / 2 + eta^T theta); None where the
+    product or a corrected precision is not positive definite."""
+    if product is None:
+        return None
     mix = _temper(product, tau)
     return mix if lam is None else _apply_gaussian_ratio(mix, lam, eta)
 

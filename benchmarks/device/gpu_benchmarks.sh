@@ -27,7 +27,8 @@
 #
 #   background STEP...  the steps, started in their own process session so that they outlast this call (a warm
 #                machine keeps them running until it goes back): their logs and files go to /tmp/background_out
-#   collect      what the background steps have written so far, copied into $OUT (their logs' tails printed)
+#   collect      what the background steps have written so far, copied into $OUT (their logs' tails printed), and
+#                the run directories of studies under /tmp/calibration_*, tarred (results, configs, errors)
 #
 # Logs and JSON go to $OUT (./device_out where OUT is unset), one log per step, each headed by the commit, the
 # machine and the date. Every step runs even when an earlier one failed; the exit status is 1 if any failed.
@@ -202,6 +203,14 @@ BACKGROUND_OUT=/tmp/background_out
 if [ "${1:-}" = collect ] && [ $# = 1 ]; then
     for log in "$BACKGROUND_OUT"/*.log; do [ -f "$log" ] && { say "${log##*/}"; tail -n 15 "$log"; }; done
     cp -r "$BACKGROUND_OUT"/. "$OUT"/ 2>/dev/null
+    # the finished runs of a study started with `background exec` (hydra.sweep.dir=/tmp/calibration_NAME)
+    for dir in /tmp/calibration_*/; do
+        dir=$(basename "$dir")
+        [ -d "/tmp/$dir" ] || continue
+        say "$dir: $(ls /tmp/"$dir"/*/results.json 2>/dev/null | wc -l) runs with results"
+        (cd /tmp && tar -czf "$OUT/$dir.tar.gz" "$dir"/*/results.json "$dir"/*/config.yaml "$dir"/*/.hydra \
+            "$dir"/*/error.txt 2>/dev/null)
+    done
     exit 0
 fi
 if [ "${1:-}" = background ]; then  # the steps in a new session: it installs, then runs them, after this call ends

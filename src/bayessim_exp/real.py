@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from .errors import ConfigError, DataError
+from .policies import RandomPolicy, ReplayPolicy
 from .registry import register
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
@@ -53,7 +54,8 @@ class FileConfig:
 class SurrogateReal:
     """A simulated 'real' system whose parameters the inference never sees: the task's real_params, or
     (truth=prior) a draw from the prior seeded by the run's seed, so that a sweep over seeds is a
-    known-truth calibration study (sweeps/calibration.yaml)."""
+    known-truth calibration study (sweeps/calibration.yaml). Driven by the collect policy, or at random
+    where that policy replays the real trajectories (policy=replay)."""
 
     fingerprint = None  # nothing outside the config to bind to the run dir
 
@@ -69,6 +71,10 @@ class SurrogateReal:
         """Nothing to check: the task's config was validated when it was built."""
 
     def collect(self, round_index: int, policy, horizon: int, seed: int) -> Trajectories:
+        if isinstance(policy, ReplayPolicy):
+            # a collect policy that replays the real trajectories cannot drive the system it replays: the
+            # surrogate acts as a robot under its own excitation controller, uniformly at random
+            policy = RandomPolicy(self.task.action_dim, seed)
         params = np.repeat(self.true_params[None], self.cfg.per_round, 0)
         traj = self.sims.get(self.cfg.per_round).rollout(params, policy, horizon, seed)
         if traj.diverged.any():

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow
 CONF = Path(__file__).resolve().parents[2] / "conf"
 GROUPS = (*registry.GROUPS, "experiment")
 
-RUN_HERE = ["prior=loguniform", "prior=gaussian", "policy=fixed", "policy=rl", "model=linear", "sim=native",
+RUN_HERE = ["prior=loguniform", "prior=gaussian", "policy=fixed", "policy=rl", "policy=replay", "model=linear", "sim=native",
             "experiment=bayessimig_pendulum", "experiment=gpu_pendulum", "experiment=gpu_humanoid"]
 # run end to end elsewhere: a whole group, or one option (the defaults run in nearly every test)
 RUN_ELSEWHERE = {
@@ -24,7 +24,6 @@ RUN_ELSEWHERE = {
     "model=mdnn": "the default", "rl=none": "the default", "sim=auto": "the default", "real=surrogate": "the default",
     "method=simopt": "test_simopt_pipeline.py", "policy=rl_randomized": "test_rl_pipeline.py",
     "rl=ppo": "test_rl_pipeline.py", "real=file": "test_pipeline.py, test_real_data.py",
-    "policy=replay": "test_pipeline.py, test_real_data.py (the collect policy real=file chooses)",
     "model=mdrff": "test_pipeline.py", "model=flow": "test_pipeline.py",
     "model=mdnn_projected_diagonal": "task=Cartpole, task=Ant", "model=mdnn_projected_diagonal_ensemble":
         "task=ShadowHand_more", "model=mdnn_projected_diagonal_one_component": "task=Humanoid",

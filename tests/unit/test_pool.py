@@ -71,6 +71,20 @@ def test_replay_without_recorded_trajectories_says_what_it_needs(compose):
             np.array([[1.3, 0.6]]), ReplayPolicy(ReplayPolicyConfig(0.0), None, task, seed=0), horizon=5, seed=0)
 
 
+def test_a_surrogate_under_a_replaying_collect_policy_is_driven_at_random_and_then_replayed(compose, tmp_path):
+    """The surrogate 'real' system cannot be driven by the replay of its own trajectories: it acts as a robot under
+    its own excitation, uniformly at random with the real stage's seed, and the simulations replay that."""
+    from bayessim_exp.pipeline import Pipeline
+    from bayessim_exp.policies import RandomPolicy, ReplayPolicy
+
+    comp = Pipeline(compose(["debug=smoke", "policy=replay"]), tmp_path).comp
+    policy = comp.policy(seed=11)
+    assert isinstance(policy, ReplayPolicy)
+    real = comp.real.collect(1, policy, horizon=15, seed=11)
+    torch.testing.assert_close(real.actions, RandomPolicy(comp.task.action_dim, 11).open_loop_actions(1, 15))
+    assert compose(["task=FrankaCabinet"]).policy.name == "replay"  # its summaries say nothing under random actions
+
+
 def test_real_data_from_a_file_replay_by_default_and_the_command_line_wins(compose):
     assert compose(["real=file", "real.path=x.npz"]).policy.name == "replay"
     assert compose(["real=file", "real.path=x.npz", "policy=random"]).policy.name == "random"

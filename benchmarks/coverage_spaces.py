@@ -30,6 +30,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from bayessim_exp import api
+    from bayessim_exp.diagnostics.coverage import credibility_ranks
     from bayessim_exp.diagnostics.scoring import hpd_level
     from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
     from bayessim_exp.pipeline import Pipeline
@@ -49,16 +50,15 @@ def main() -> None:
     theta = summaries["theta"][-held_out:][: args.pairs].double()
     x = summaries["x"][-held_out:][: args.pairs]
 
+    # probit space: the levels the guard's held-out coverage reads (diagnostics/coverage.py)
+    in_probit = credibility_ranks(model, probit.to_probit(theta).double(), x, args.draws, args.seed)[0].numpy()
     generator = torch.Generator().manual_seed(args.seed)
-    in_probit, in_parameters = [], []
+    in_parameters = []
     for theta_i, x_i in zip(theta, x):
-        q = model.conditional(x_i)
-        u = probit.to_probit(theta_i[None]).double()
-        in_probit.append(hpd_level(q, u, q.sample((args.draws,), generator=generator).double(), generator))
-        posterior = ProbitPosterior(q, probit)
+        posterior = ProbitPosterior(model.conditional(x_i), probit)
         in_parameters.append(hpd_level(posterior, theta_i[None], posterior.sample((args.draws,), generator=generator)
                                        .double(), generator))
-    in_probit, in_parameters = np.array(in_probit, dtype=float), np.array(in_parameters, dtype=float)
+    in_parameters = np.array(in_parameters, dtype=float)
     print(f"{args.task}, seed {args.seed}, round 1, {len(theta)} held-out pairs, {args.draws} draws each\n")
     print("| region | probit space | parameter space |\n|---|---:|---:|")
     for level in cfg.diagnostics.levels:

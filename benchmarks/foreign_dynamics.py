@@ -141,6 +141,11 @@ def cases(args) -> list[dict]:
     return out
 
 
+def covered(r: dict) -> bool:
+    """The truth or the best fit of our model lies inside the final posterior's 90 % region."""
+    return min(r["level_truth"], r["level_best_fit"]) < 0.9
+
+
 def summary(rows: list[dict]) -> list[str]:
     lines = ["| group | n | cases | truth or best fit in the 90 % region | flagged | widened (temperature < 1) |",
              "|---|---:|---:|---:|---:|---:|"]
@@ -149,22 +154,19 @@ def summary(rows: list[dict]) -> list[str]:
             sel = [r for r in rows if r["group"] == group and r["n"] == n]
             if not sel:
                 continue
-            covered = sum(min(r["level_truth"], r["level_best_fit"]) < 0.9 for r in sel)
+            inside = sum(map(covered, sel))
             flagged = sum(r["flagged"] for r in sel)
             widened = sum(r["temperature"] < 1 for r in sel)
-            lines.append(f"| {group} | {n} | {len(sel)} | {covered} ({covered / len(sel):.0%}) | "
+            lines.append(f"| {group} | {n} | {len(sel)} | {inside} ({inside / len(sel):.0%}) | "
                          f"{flagged} ({flagged / len(sel):.0%}) | {widened} |")
 
     def share(sel: list[dict], hit) -> str:
         return f"{sum(map(hit, sel))} of {len(sel)}"
 
-    def inside(r: dict) -> bool:
-        return min(r["level_truth"], r["level_best_fit"]) < 0.9
-
     lacking = [r for r in rows if r["group"] == "physics the model lacks"]
     ours = [r for r in rows if r["source"] == "ours"]
-    lines += ["", f"Over all sources: covered {share([r for r in rows if r['n'] == 1], inside)} with one trajectory "
-              f"and {share([r for r in rows if r['n'] == 5], inside)} with five; physics the model lacks flagged in "
+    lines += ["", f"Over all sources: covered {share([r for r in rows if r['n'] == 1], covered)} with one trajectory "
+              f"and {share([r for r in rows if r['n'] == 5], covered)} with five; physics the model lacks flagged in "
               f"{share(lacking, lambda r: r['flagged'])}; our own simulator (sine excitation included) flagged in "
               f"{share(ours, lambda r: r['flagged'])}."]
     return lines

@@ -23,18 +23,18 @@ import torch
 RIDGE = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5)  # the largest all but predicts the mean (R^2 near 0)
 
 
-def held_out_r2(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Best held-out R^2 per column of u over the ridge strengths (standardised x, constant columns dropped)."""
+def held_out_r2(x: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+    """Best held-out R^2 per column of u (the last fifth of the rows) over the ridge strengths, on standardised x
+    with its constant columns dropped (models/projection.RidgeSystem: intercept unpenalised)."""
+    from bayessim_exp.models.projection import RidgeSystem
+
     sd = x.std(0)
     z = (x[:, sd > 1e-9] - x[:, sd > 1e-9].mean(0)) / sd[sd > 1e-9]
-    z = np.c_[z, np.ones(len(z))]
-    n_train = int(0.8 * len(z))
-    best = np.full(u.shape[1], -np.inf)
-    for ridge in RIDGE:
-        w = np.linalg.solve(z[:n_train].T @ z[:n_train] + ridge * np.eye(z.shape[1]), z[:n_train].T @ u[:n_train])
-        residual = ((z[n_train:] @ w - u[n_train:]) ** 2).mean(0)
-        best = np.maximum(best, 1 - residual / u[n_train:].var(0))
-    return best
+    system = RidgeSystem(z, u)
+    held = torch.arange(len(z)) >= int(0.8 * len(z))
+    residuals = torch.stack([(system.predict(held, system.solve(ridge, held)) - system.y[held]).pow(2).mean(0)
+                             for ridge in RIDGE])
+    return 1 - residuals.min(0).values / system.y[held].var(0, correction=0)
 
 
 def main() -> None:
@@ -57,7 +57,7 @@ def main() -> None:
     summarizer = registry.build("summarizer", cfg.summarizer)
     pool = SimulatorPool(registry.build("sim", cfg.sim), task, 4096)
     theta = prior.sample((args.sims,), generator=torch.Generator().manual_seed(args.seed)).double()
-    u = ProbitTransform(prior).to_probit(theta).numpy()
+    u = ProbitTransform(prior).to_probit(theta).double()
     rng = np.random.default_rng(args.seed)
     n, shape = args.sims, (args.sims, args.horizon, task.action_dim)
     recorded_actions = rng.uniform(-1, 1, (1, args.horizon, task.action_dim))
@@ -75,9 +75,9 @@ def main() -> None:
     for name, (actions, state) in settings.items():
         traj = pool.rollout(theta, OpenLoopPolicy(torch.as_tensor(actions, dtype=torch.float32)), args.horizon,
                             args.seed, state=state)
-        x = summarizer(traj).double().numpy()
-        keep = ~traj.diverged.cpu().numpy() & np.isfinite(x).all(1)
-        r2[name] = held_out_r2(x[keep], u[keep])
+        x = summarizer(traj).double().cpu()
+        keep = ~traj.diverged.cpu() & torch.isfinite(x).all(1)
+        r2[name] = held_out_r2(x[keep], u[keep]).numpy()
 
     print(f"{args.task}, summarizer {cfg.summarizer.name}, {n} prior draws, held-out R^2 per parameter:\n")
     print("| parameter | " + " | ".join(settings) + " |")

@@ -208,8 +208,8 @@ if [ "${1:-}" = collect ] && [ $# = 1 ]; then
         dir=$(basename "$dir")
         [ -d "/tmp/$dir" ] || continue
         say "$dir: $(ls /tmp/"$dir"/*/results.json 2>/dev/null | wc -l) runs with results"
-        (cd /tmp && tar -czf "$OUT/$dir.tar.gz" "$dir"/*/results.json "$dir"/*/config.yaml "$dir"/*/.hydra \
-            "$dir"/*/error.txt 2>/dev/null)
+        (cd /tmp && tar -czf "$OUT/$dir.tar.gz" "$dir"/report "$dir"/*/results.json "$dir"/*/config.yaml \
+            "$dir"/*/.hydra "$dir"/*/error.txt 2>/dev/null)  # the calibration step's report too, when there is one
     done
     exit 0
 fi

@@ -98,17 +98,12 @@ class ReplayPolicy:
             raise ConfigError("policy=replay replays recorded real trajectories, and none is recorded yet: use it "
                               "with real data that carry their actions (real=file), or another collect policy")
         which = torch.randint(self.recorded.num, (n,), generator=self.generator)
-        actions = self.perturbed(self.recorded.actions[which].float().cpu(), self.generator)
+        actions = self.recorded.actions[which].float().cpu()
+        if self.cfg.action_noise > 0:
+            noise = torch.randn(actions.shape, generator=self.generator) * self.cfg.action_noise
+            actions = (actions + noise).clamp(-1.0, 1.0)
         start = self.task.state_from_observation(self.recorded.states[which, 0].double().cpu().numpy())
         return OpenLoopPolicy(actions), start
-
-    def perturbed(self, actions: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-        """What the replay assumes a system executes of its logged actions: each plus Gaussian noise of std
-        `action_noise`, clipped to the normalised bounds."""
-        if self.cfg.action_noise == 0:
-            return actions
-        noise = torch.randn(actions.shape, generator=generator) * self.cfg.action_noise
-        return (actions + noise).clamp(-1.0, 1.0)
 
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         raise ConfigError("policy=replay drives batches of simulations through SimulatorPool.rollout "

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from .errors import ConfigError, DataError
-from .policies import OpenLoopPolicy, RandomPolicy, ReplayPolicy
+from .policies import RandomPolicy, ReplayPolicy
 from .registry import register
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
@@ -54,10 +54,8 @@ class FileConfig:
 class SurrogateReal:
     """A simulated 'real' system whose parameters the inference never sees: the task's real_params, or
     (truth=prior) a draw from the prior seeded by the run's seed, so that a sweep over seeds is a
-    known-truth calibration study (sweeps/calibration.yaml). Driven by the collect policy, or, where that
-    policy replays the real trajectories (policy=replay), by uniformly random commands that it executes as the
-    replay assumes a system does: with the replay's action noise (`ReplayPolicy.perturbed`). It logs the
-    commands, so that its trajectories are distributed as the simulations that replay them."""
+    known-truth calibration study (sweeps/calibration.yaml). Driven by the collect policy, or at random
+    where that policy replays the real trajectories (policy=replay)."""
 
     fingerprint = None  # nothing outside the config to bind to the run dir
 
@@ -73,18 +71,15 @@ class SurrogateReal:
         """Nothing to check: the task's config was validated when it was built."""
 
     def collect(self, round_index: int, policy, horizon: int, seed: int) -> Trajectories:
-        n = self.cfg.per_round
-        commands = None
         if isinstance(policy, ReplayPolicy):
             # a collect policy that replays the real trajectories cannot drive the system it replays: the
-            # surrogate is a robot under its own excitation controller, and the replay's well-specified case
-            commands = RandomPolicy(self.task.action_dim, seed).open_loop_actions(n, horizon)
-            executed = policy.perturbed(commands, torch.Generator().manual_seed(stage_seed(seed, 0, "execution")))
-            policy = OpenLoopPolicy(executed)
-        traj = self.sims.get(n).rollout(np.repeat(self.true_params[None], n, 0), policy, horizon, seed)
+            # surrogate acts as a robot under its own excitation controller, uniformly at random
+            policy = RandomPolicy(self.task.action_dim, seed)
+        params = np.repeat(self.true_params[None], self.cfg.per_round, 0)
+        traj = self.sims.get(self.cfg.per_round).rollout(params, policy, horizon, seed)
         if traj.diverged.any():
             raise DataError("the surrogate real system diverged; check the task's real_params")
-        return traj if commands is None else dataclasses.replace(traj, actions=commands.to(traj.actions))
+        return traj
 
 
 class FileReal:

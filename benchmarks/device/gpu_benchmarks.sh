@@ -28,7 +28,8 @@
 #   background STEP...  the steps, started in their own process session so that they outlast this call (a warm
 #                machine keeps them running until it goes back): their logs and files go to /tmp/background_out
 #   collect      what the background steps have written so far, copied into $OUT (their logs' tails printed), and
-#                the run directories of studies under /tmp/calibration_*, tarred (results, configs, errors)
+#                the run directories of studies under /tmp/calibration_*, tarred (results, configs, errors), with
+#                how many runs finished every round (results.json is rewritten after each)
 #
 # Logs and JSON go to $OUT (./device_out where OUT is unset), one log per step, each headed by the commit, the
 # machine and the date. Every step runs even when an earlier one failed; the exit status is 1 if any failed.
@@ -207,7 +208,10 @@ if [ "${1:-}" = collect ] && [ $# = 1 ]; then
     for dir in /tmp/calibration_*/; do
         dir=$(basename "$dir")
         [ -d "/tmp/$dir" ] || continue
-        say "$dir: $(ls /tmp/"$dir"/*/results.json 2>/dev/null | wc -l) runs with results"
+        # results.json is rewritten after every round: count by status, as the report does (report/jobs.py)
+        say "$dir: $("$PY" -c "import collections, sys; from bayessim_exp.report.jobs import read_jobs
+print(', '.join(f'{n} {s}' for s, n in sorted(collections.Counter(j.status for j in read_jobs(sys.argv[1])).items())))" \
+            "/tmp/$dir")"
         (cd /tmp && tar -czf "$OUT/$dir.tar.gz" "$dir"/report "$dir"/*/results.json "$dir"/*/config.yaml \
             "$dir"/*/.hydra "$dir"/*/error.txt 2>/dev/null)  # the calibration step's report too, when there is one
     done

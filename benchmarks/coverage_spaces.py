@@ -7,7 +7,12 @@ parameters); a known-truth study and the results ask whether the truth lies in t
 over the parameters themselves, whose density carries the map's Jacobian. For an exact posterior both regions
 cover as their level says; an approximate one can be calibrated in one space and not in the other. Runs the
 task's default round 1 up to its fit (kept in --out and reused), then ranks --pairs held-out simulations' own
-parameters among --draws posterior draws given their summaries, in both spaces.
+parameters among --draws posterior draws given their summaries, in both spaces. With --exact-replays (tasks that
+replay the real actions, policy=replay) the pairs are fresh prior draws replaying the recorded actions without
+the replay's noise, as the surrogate real system executed them: a known-truth study's truths, not its
+simulations.
+
+    PYTHONPATH=src python benchmarks/coverage_spaces.py --task FrankaCabinet --exact-replays --out /tmp/cs real.truth=prior
 """
 
 from __future__ import annotations
@@ -26,6 +31,8 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=300)
     ap.add_argument("--draws", type=int, default=1000)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--exact-replays", action="store_true",
+                    help="rank prior draws replaying the recorded actions without noise, not held-out simulations")
     ap.add_argument("overrides", nargs="*", help="added to the run (e.g. sim.nthread=1)")
     args = ap.parse_args()
 
@@ -46,9 +53,12 @@ def main() -> None:
     model = pipeline.comp.model()
     model.load_state_dict(fitted["model"])
     probit = ProbitTransform(pipeline.comp.prior)
-    held_out = int(cfg.diagnostics.held_out_fraction * len(summaries["theta"]))
-    theta = summaries["theta"][-held_out:][: args.pairs].double()
-    x = summaries["x"][-held_out:][: args.pairs]
+    if args.exact_replays:
+        theta, x = exact_replays(pipeline, args.out, args.pairs, args.seed)
+    else:
+        held_out = int(cfg.diagnostics.held_out_fraction * len(summaries["theta"]))
+        theta = summaries["theta"][-held_out:][: args.pairs].double()
+        x = summaries["x"][-held_out:][: args.pairs]
 
     # probit space: the levels the guard's held-out coverage reads (diagnostics/coverage.py)
     in_probit = credibility_ranks(model, probit.to_probit(theta).double(), x, args.draws, args.seed)[0].numpy()
@@ -59,10 +69,25 @@ def main() -> None:
         in_parameters.append(hpd_level(posterior, theta_i[None], posterior.sample((args.draws,), generator=generator)
                                        .double(), generator))
     in_parameters = np.array(in_parameters, dtype=float)
-    print(f"{args.task}, seed {args.seed}, round 1, {len(theta)} held-out pairs, {args.draws} draws each\n")
+    pairs = "prior draws replaying the recorded actions exactly" if args.exact_replays else "held-out pairs"
+    print(f"{args.task}, seed {args.seed}, round 1, {len(theta)} {pairs}, {args.draws} draws each\n")
     print("| region | probit space | parameter space |\n|---|---:|---:|")
     for level in cfg.diagnostics.levels:
         print(f"| HPD {level:.0%} | {(in_probit < level).mean():.3f} | {(in_parameters < level).mean():.3f} |")
+
+
+def exact_replays(pipeline, out: Path, count: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """count prior draws and the summaries of their simulations replaying round 1's real trajectories without noise."""
+    from bayessim_exp.policies import ReplayPolicy, ReplayPolicyConfig
+    from bayessim_exp.sim.trajectories import Trajectories
+
+    comp = pipeline.comp
+    recorded = Trajectories(**torch.load(out / "round_001" / "real.pt", weights_only=False)["traj"])
+    theta = comp.prior.sample((count,), generator=torch.Generator().manual_seed(seed)).double()
+    replays = comp.sims.rollout(theta, ReplayPolicy(ReplayPolicyConfig(0.0), recorded, comp.task, seed),
+                                recorded.horizon, seed=seed)
+    kept = ~replays.diverged.cpu()
+    return theta[kept], comp.summarizer(replays.to(comp.device)).cpu()[kept]
 
 
 if __name__ == "__main__":

@@ -155,3 +155,29 @@ def test_a_product_double_precision_cannot_hold_falls_back_to_the_narrowed_condi
     post, expected = posterior([flat, sharp], standard_normal_prior(2)), posterior(narrowed, standard_normal_prior(2))
     assert isinstance(post, GaussianMixture)
     assert torch.allclose(post.mean, expected.mean) and torch.allclose(post.covariance, expected.covariance)
+
+
+def test_conditionals_no_product_of_which_factorises_are_importance_sampled_from_side_by_side(monkeypatch):
+    """Where neither the conditionals' product nor that of the conditionals narrowed to the prior factorises (a
+    FrankaCabinet run's product temperature search, round 3, with policy.action_noise=0.1), the importance sampler
+    draws from the conditionals side by side instead of from their product, and the run goes on."""
+    from bayessim_exp.distributions.importance import ImportancePosterior
+    from bayessim_exp.distributions.mixture import NotPositiveDefinite
+    from bayessim_exp.inference.bayessim import correction
+
+    eye = torch.eye(2, dtype=torch.float64)
+    conditionals = [GaussianMixture(torch.zeros(1), torch.tensor([[0.5, 0.0]]), 0.3 * eye[None]),
+                    GaussianMixture(torch.zeros(1), torch.tensor([[0.3, 0.2]]), 0.4 * eye[None])]
+    expected = correction.posterior(conditionals, standard_normal_prior(2))
+    assert isinstance(expected, GaussianMixture)
+
+    def cannot_factorise(mixtures, max_components):
+        raise NotPositiveDefinite("as double precision cannot")
+
+    monkeypatch.setattr(correction, "_product", cannot_factorise)
+    monkeypatch.setattr(correction, "_no_wider_than", lambda mix, cov0: cannot_factorise([mix], 1))
+    post = correction.posterior(conditionals, standard_normal_prior(2), seed=0)
+    assert isinstance(post, ImportancePosterior)
+    draws = post.sample((20000,), generator=torch.Generator().manual_seed(1)).double()
+    assert torch.allclose(draws.mean(0), expected.mean, atol=0.03)
+    assert torch.allclose(torch.cov(draws.T), expected.covariance, atol=0.03)

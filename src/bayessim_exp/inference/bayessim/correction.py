@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 from collections.abc import Callable, Sequence
 
 import torch
@@ -119,6 +120,13 @@ def _product(mixtures: Sequence[GaussianMixture], max_components: int) -> Gaussi
     return out
 
 
+def _side_by_side(mixtures: Sequence[GaussianMixture]) -> GaussianMixture:
+    """One mixture of all the components, each mixture's weights scaled by 1 / len(mixtures)."""
+    log_weights = torch.cat([torch.log_softmax(m.log_weights.double(), -1) for m in mixtures]) - math.log(len(mixtures))
+    return GaussianMixture(log_weights, torch.cat([m.means.double() for m in mixtures]),
+                           torch.cat([m.covs.double() for m in mixtures]))
+
+
 def _temper(mix: GaussianMixture, tau: float) -> GaussianMixture:
     """mix^tau renormalised, component by component: N(m, S)^tau is proportional to N(m, S / tau) with
     integral proportional to |S|^((1 - tau) / 2). Exact for one component or well-separated ones."""
@@ -168,15 +176,20 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
         # dividing by the prior then leaves a negative precision, and far wider ones (a model far outside its
         # training summaries: variances of 1e14) leave products double precision cannot factorise (None):
         # `narrowed` clamps them to the prior's
-        factors = [_no_wider_than(q, prior_factor[1]) for q in conditionals] if narrowed else conditionals
         try:
+            factors = [_no_wider_than(q, prior_factor[1]) for q in conditionals] if narrowed else conditionals
             return _product(factors, max_components)
         except NotPositiveDefinite:
             return None
 
     @functools.cache
     def moment_product() -> GaussianMixture:
-        return _product([_moment_gaussian(q) for q in conditionals], max_components)
+        # the importance sampler's proposal; where no product factorises, the conditionals side by side still
+        # cover where each puts its mass
+        try:
+            return _product([_moment_gaussian(q) for q in conditionals], max_components)
+        except NotPositiveDefinite:
+            return _side_by_side([_moment_gaussian(q) for q in conditionals])
 
     def at(temperature: float):
         if not 0.0 < temperature <= 1.0:

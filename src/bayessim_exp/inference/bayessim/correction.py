@@ -186,10 +186,11 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
     def moment_product() -> GaussianMixture:
         # the importance sampler's proposal; where no product factorises, the conditionals side by side still
         # cover where each puts its mass
+        gaussians = [_moment_gaussian(q) for q in conditionals]
         try:
-            return _product([_moment_gaussian(q) for q in conditionals], max_components)
+            return _product(gaussians, max_components)
         except NotPositiveDefinite:
-            return _side_by_side([_moment_gaussian(q) for q in conditionals])
+            return _side_by_side(gaussians)
 
     def at(temperature: float):
         if not 0.0 < temperature <= 1.0:

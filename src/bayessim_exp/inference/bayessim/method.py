@@ -2,8 +2,9 @@
 q(theta | x), condition on every real summary with the proposal's correction.
 
 Stages of a round: collect (parameters from the proposal, trajectories under the collect policy)
--> summarize -> fit (the posterior model, its spread calibrated and its coverage and gain measured on
-the round's own held-out simulations) -> condition (the posterior given all real trajectories,
+-> summarize -> identifiability (which parameters the summaries can pin down, diagnostics/identifiability.py)
+-> fit (the posterior model, its spread calibrated and its coverage and gain measured on the round's own
+held-out simulations) -> condition (the posterior given all real trajectories,
 docs/statistics.md, widened until the real trajectories lie among its replays where the task can
 replay them) -> model_check (predictive checks, the mismatch verdict) -> guard (what the round hands
 on: its posterior, or on a failed check the last one that passed, method.on_guard).
@@ -15,11 +16,13 @@ import dataclasses
 import logging
 from collections.abc import Callable
 
+import numpy as np
 import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
 from ...diagnostics.extrapolation import inputs_outside
 from ...diagnostics.guard import ACTIONS, check_posterior
+from ...diagnostics.identifiability import STEP, linear_read, sensitivity
 from ...diagnostics.local_coverage import local_coverage
 from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
@@ -30,6 +33,8 @@ from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
 from ...errors import ConfigError, PosteriorError
+from ...models.base import column_scale
+from ...policies import OpenLoopPolicy, RandomPolicy
 from ...registry import register
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
@@ -88,6 +93,7 @@ class BayesSim(InferenceMethod):
         return [
             Stage("collect", self.collect, transient=not self.comp.rc.collect.keep_trajectories),
             Stage("summarize", self.summarize, inputs=("collect",)),
+            Stage("identifiability", self.identifiability, inputs=("summarize",)),
             Stage("fit", self.fit, inputs=("summarize",)),
             Stage("condition", self.condition, inputs=("real", "fit")),
             Stage("model_check", self.model_check, inputs=("real", "summarize", "fit", "condition")),
@@ -141,6 +147,56 @@ class BayesSim(InferenceMethod):
         finite = torch.isfinite(x).all(1)
         theta = collected["theta"][keep.cpu()][finite]
         return {"theta": theta, "x": x[finite], "diverged": int((~keep).sum()) + int((~finite).sum())}
+
+    def identifiability(self, ctx: RoundContext) -> dict:
+        """What the round's summaries can say about each parameter (diagnostics/identifiability.py): the linear read
+        of its training simulations, and in round 1 the local sensitivity at the nominal parameters, whose
+        parameters that move nothing are said before any fit."""
+        theta, x, _, _ = self._split(ctx.output("summarize"))
+        d, names = self.comp.rc.diagnostics, self.comp.task.spec.names
+        report = {**linear_read(x, self._fitted_space(theta), names), "local": None}
+        for entry in report["trade_offs"]:
+            log.info("round %d: %s and %s are told apart only in part (held-out prediction errors correlate %+.2f)",
+                     ctx.round, *entry["pair"], entry["correlation"])
+        if d.sensitivity_sims and ctx.round == 1:
+            report["local"] = local = sensitivity(lambda points: self._summaries_at(ctx, points), self._nominal(),
+                                                  column_scale(x.double()), names)
+            if local["no_effect"]:
+                log.warning("round 1: %s move no summary at the nominal parameters (local sensitivity): the data "
+                            "cannot identify them, and their posterior stays at the prior", ", ".join(local["no_effect"]))
+            for entry in local["collinear"]:
+                log.warning("round 1: %s and %s act alike at the nominal parameters (collinearity index %.0f): the data "
+                            "pin down a combination of them", *entry["pair"], entry["index"])
+        ctx.tb.identifiability(ctx.round, names, report)
+        return report
+
+    def _nominal(self) -> torch.Tensor:
+        """The task's nominal parameters in units of the prior's standard deviation, kept a step inside the box."""
+        spec, std = self.comp.task.spec, self.comp.prior.stddev.double()
+        low, high = torch.as_tensor(spec.low) + STEP * std, torch.as_tensor(spec.high) - STEP * std
+        return torch.maximum(torch.minimum(torch.as_tensor(spec.nominal, dtype=torch.float64), high), low) / std
+
+    def _summaries_at(self, ctx: RoundContext, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """identifiability.sensitivity's simulations: `diagnostics.sensitivity_sims` action sequences and initial states
+        (the collect policy's where it acts open loop, uniform random actions otherwise), the same at every point of
+        points [K, D] (parameters in units of the prior's standard deviation): (summaries [K, M, F], kept [M])."""
+        m, horizon = self.comp.rc.diagnostics.sensitivity_sims, self.comp.rc.collect.horizon
+        policy, task = self.comp.policy(ctx.seed, ctx), self.comp.task
+        start = None
+        if hasattr(policy, "plan"):
+            policy, start = policy.plan(m)
+        actions = (policy.actions if isinstance(policy, OpenLoopPolicy) else
+                   (policy if hasattr(policy, "open_loop_actions") else RandomPolicy(task.action_dim, ctx.seed))
+                   .open_loop_actions(m, horizon))[:, :horizon]
+        if start is None:
+            start = task.reset_state(np.random.default_rng(ctx.seed), m)
+        k = len(points)
+        theta = points * self.comp.prior.stddev.double()
+        traj = self.comp.sims.rollout(theta.repeat_interleave(m, 0), OpenLoopPolicy(actions.repeat(k, 1, 1)), horizon,
+                                      ctx.seed, state={f: np.tile(v, (k,) + (1,) * (v.ndim - 1)) for f, v in start.items()})
+        x = self._summaries(traj).double().reshape(k, m, -1)
+        kept = ~traj.diverged.cpu().reshape(k, m).any(0) & torch.isfinite(x).all(-1).all(0)
+        return x, kept
 
     def fit(self, ctx: RoundContext) -> dict:
         r = ctx.round
@@ -405,6 +461,7 @@ class BayesSim(InferenceMethod):
             "proposal": self.proposal_name(ctx),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],
+            "identifiability": {k: v for k, v in ctx.output("identifiability").items() if k != "seconds"},
             "guard": {**{k: guard[k] for k in ("ok", "failed", "warnings", "action")},
                       "handed_on": _round_name(guard["handed_on"])},
             "dispersion": conditioned["dispersion"],

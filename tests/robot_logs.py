@@ -11,6 +11,7 @@ import pyarrow.parquet as pq
 
 V2_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
 V3_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
+NAMES = {"observation.state": ["cos_theta", "sin_theta", "theta_dot"], "action": ["torque"]}  # Pendulum's own
 
 
 def pendulum_frames(states: np.ndarray, actions: np.ndarray) -> list[dict[str, np.ndarray]]:

@@ -17,10 +17,9 @@ from bayessim_exp.policies import OpenLoopPolicy
 from bayessim_exp.real import load_trajectories, save_trajectories
 from bayessim_exp.recorded import resample
 from bayessim_exp.sim.pool import SimulatorPool
-from robot_logs import pendulum_frames, write_csv, write_lerobot
+from robot_logs import NAMES, pendulum_frames, write_csv, write_lerobot
 
 STEPS, FAST = 30, 5  # control steps; the fast log's frames per control step (100 Hz for 20 Hz)
-NAMES = {"observation.state": ["cos_theta", "sin_theta", "theta_dot"], "action": ["torque"]}
 
 
 def _rollout(overrides, actions, state):

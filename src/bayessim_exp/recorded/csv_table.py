@@ -31,8 +31,8 @@ class CsvConfig:
     time_scale: float
     episode_column: str | None
     episodes: list[str] | None
-    observations: dict[str, Any]
-    actions: dict[str, Any]
+    observations: dict[str, Any] | None
+    actions: dict[str, Any] | None
     actions_normalised: bool
 
     def validate(self) -> None:

@@ -32,8 +32,8 @@ FPS_TOLERANCE = 0.01  # relative disagreement of info.json's fps and the time st
 class LeRobotConfig:
     path: str
     episodes: list[int] | None
-    observations: dict[str, Any]
-    actions: dict[str, Any]
+    observations: dict[str, Any] | None
+    actions: dict[str, Any] | None
     actions_normalised: bool
 
 

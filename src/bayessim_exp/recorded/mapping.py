@@ -140,9 +140,10 @@ def _entry(target: str, value, schema: Schema, where: str, purpose: str, transfo
 class Mapping:
     """The task's observations and actions as functions of a log's features, checked against its schema."""
 
-    def __init__(self, observations: dict, actions: dict, actions_normalised: bool, task: Task, schema: Schema,
-                 where: str):
+    def __init__(self, observations: dict | None, actions: dict | None, actions_normalised: bool, task: Task,
+                 schema: Schema, where: str):
         self.task, self.normalised = task, actions_normalised
+        observations, actions = observations or {}, actions or {}  # null: every target by its own name
         actuators = [mujoco.mj_id2name(task.model, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or str(i)
                      for i in range(task.model.nu)]
         self.obs = self._entries("observations", observations, task.obs_names, schema, where, action=False)

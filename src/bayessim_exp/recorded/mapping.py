@@ -174,8 +174,8 @@ class Mapping:
                 close = difflib.get_close_matches(target, elements, n=1, cutoff=0.5)
                 hint = f" (closest: {elements[close[0]]})" if close else ""
                 raise ConfigError(f"{purpose}: the log names no element {target!r}{hint}; map it, e.g. "
-                                  f"{purpose}=<source> or {{from: <source>, unit: deg, ...}} (README.md, 'Real data "
-                                  f"from a robot'); {_known(where, schema)}")
+                                  f"real.{key}={{{target}: <source>}} or {{{target}: {{from: <source>, unit: deg, ...}}}} "
+                                  f"(README.md, 'Real data from a robot'); {_known(where, schema)}")
             entries.append(Entry(target, source, 1.0, 0.0, None))
         return entries
 

@@ -139,6 +139,10 @@ def test_hold_average_keeps_the_impulse_of_commands_at_any_rate_ratio():
     np.testing.assert_allclose(grid, [0, 0.05, 0.1, 0.15, 0.2])
     np.testing.assert_allclose(resample.hold_average(times, commands, grid), [1 + 1 / 3, 2 + 2 / 3, 4 + 1 / 3, 5 + 2 / 3])
     np.testing.assert_allclose(resample.interpolate(times, 3 * times, grid), 3 * grid)
+    jittered = np.arange(11) * 0.05 + np.tile([0, 0.002], 6)[:11]  # a robot's clock: steps of 0.048 s to 0.052 s
+    np.testing.assert_allclose(resample.control_times(jittered, 0.05, "log"), np.arange(11) * 0.05)
+    with pytest.raises(DataError, match="time jumps by 0.1 s at row 4"):
+        resample.control_times(np.delete(np.arange(11) * 0.05, 4), 0.05, "log")
 
 
 def _pendulum_lerobot(tmp_path, recorded, **kwargs):

@@ -53,7 +53,7 @@ def _schema(features: dict, where: str) -> Schema:
     schema = {}
     for name, spec in features.items():
         shape = spec.get("shape") if isinstance(spec, dict) else None
-        if name in BOOKKEEPING or spec.get("dtype") in ("video", "image", "string") or not shape or len(shape) != 1:
+        if name in BOOKKEEPING or not shape or len(shape) != 1 or spec.get("dtype") in ("video", "image", "string"):
             continue
         names = spec.get("names")
         if isinstance(names, dict):
@@ -85,9 +85,8 @@ def _data_files(root: Path, info: dict, episodes: list[int] | None) -> list[Path
     return files
 
 
-def _columns(table, names: list[str], schema: Schema, where: str) -> dict[str, np.ndarray]:
+def _columns(pa, table, names: list[str], schema: Schema, where: str) -> dict[str, np.ndarray]:
     """Arrow columns -> arrays [rows, width]; a vector feature is a list column."""
-    pa, _ = _parquet()
     out = {}
     for name in names:
         column = table.column(name).combine_chunks()
@@ -140,7 +139,7 @@ def read(cfg: LeRobotConfig, task: Task) -> LogReal:
         if absent:
             raise DataError(f"{root}: {where} has no column {', '.join(absent)} although meta/info.json declares "
                             f"it; its columns: {', '.join(table.column_names)}")
-        columns = _columns(table, wanted, schema, f"{root}: {where}")
+        columns = _columns(pa, table, wanted, schema, f"{root}: {where}")
         index = columns.pop("episode_index")[:, 0].astype(int)
         for e in dict.fromkeys(index.tolist()):
             frames.setdefault(e, []).append({k: v[index == e] for k, v in columns.items()})

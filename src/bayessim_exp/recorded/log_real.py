@@ -60,6 +60,8 @@ class LogReal:
     true_params = None
 
     def __init__(self, episodes: dict[str, tuple[np.ndarray, np.ndarray]], task: Task, fingerprint: str, where: str):
+        if not episodes:
+            raise DataError(f"{where}: the log holds no frames")
         self.episodes, self.task, self.fingerprint, self.where = episodes, task, fingerprint, where
         self._trajectories: Trajectories | None = None
 

@@ -195,11 +195,11 @@ class Mapping:
                                 f"at row {bad[0]} ({bad.size} such rows); drop or fill those frames")
             return values
 
-        raws = {id(e): raw(e) for e in self.obs + self.actions}  # every value checked before the time stamps
+        raws = [raw(e) for e in self.obs + self.actions]  # every value checked before the time stamps
         grid = resample.control_times(times, self.task.cfg.control_dt, where)
         states = []
-        for e in self.obs:
-            value = e.convert(raws[id(e)])
+        for e, values in zip(self.obs, raws):
+            value = e.convert(values)
             if e.transform is not None and e.transform != "rate":  # an angle: no wrap interpolated or differentiated
                 value = np.unwrap(value)
             if e.transform in ("rate", "angle_rate"):
@@ -207,8 +207,8 @@ class Mapping:
             value = resample.interpolate(times, value, grid)
             states.append(getattr(np, e.transform)(value) if e.transform in ("cos", "sin") else value)
         actions = []
-        for k, e in enumerate(self.actions):
-            value = e.convert(raws[id(e)])
+        for k, (e, values) in enumerate(zip(self.actions, raws[len(self.obs):])):
+            value = e.convert(values)
             normalised = value if self.normalised else (value - self._mid[k]) / self._half[k]
             over = np.flatnonzero(np.abs(normalised) > 1 + 1e-6)
             if over.size:

@@ -14,8 +14,11 @@ import numpy as np
 
 from ..errors import DataError
 
-# relative slack on time steps: float32 time stamps of a long log carry rounding of about 1e-7 s per second
-RATE_TOLERANCE = 1e-3
+# a frame step this much longer than the control step is still resampled: a robot's clock jitters, and
+# interpolating over a step 5 % longer than the control step invents nothing the summaries would read
+JITTER = 0.05
+# the share of a control step by which the log may end short of the last control time: float32 time stamps
+ROUNDING = 1e-3
 
 
 def control_times(times: np.ndarray, dt: float, where: str) -> np.ndarray:
@@ -32,16 +35,16 @@ def control_times(times: np.ndarray, dt: float, where: str) -> np.ndarray:
         raise DataError(f"{where}: time does not increase at row {row} ({times[row - 1]:g} s, then {times[row]:g} s); "
                         "sort the rows by time and drop repeated frames")
     typical = float(np.median(steps))
-    if typical > dt * (1 + RATE_TOLERANCE):
+    if typical > dt * (1 + JITTER):
         raise DataError(f"{where}: recorded every {typical:g} s ({1 / typical:g} Hz), slower than the task's control "
                         f"step {dt:g} s ({1 / dt:g} Hz): the states between frames cannot be resampled; record at "
                         f"{1 / dt:g} Hz or faster, or run with a task.control_dt the log covers")
     gap = int(np.argmax(steps))
-    if steps[gap] > dt * (1 + RATE_TOLERANCE):
+    if steps[gap] > dt * (1 + JITTER):
         raise DataError(f"{where}: time jumps by {steps[gap]:g} s at row {gap + 1} ({times[gap]:g} s to "
                         f"{times[gap + 1]:g} s), longer than the control step {dt:g} s: frames are missing there; "
                         "cut the episode at the gap or leave it out")
-    count = int(np.floor((times[-1] - times[0]) / dt + RATE_TOLERANCE))
+    count = int(np.floor((times[-1] - times[0]) / dt + ROUNDING))
     return times[0] + dt * np.arange(count + 1)
 
 

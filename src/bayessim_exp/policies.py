@@ -96,7 +96,8 @@ class ReplayPolicy:
         """For n simulations: the actions each replays and their initial states (None: the reset distribution)."""
         if self.recorded is None:
             raise ConfigError("policy=replay replays recorded real trajectories, and none is recorded yet: use it "
-                              "with real data that carry their actions (real=file), or another collect policy")
+                              "with real data that carry their actions (real=file, real=lerobot, real=csv), or another "
+                              "collect policy")
         which = torch.randint(self.recorded.num, (n,), generator=self.generator)
         actions = self.recorded.actions[which].float().cpu()
         if self.cfg.action_noise > 0:

@@ -106,6 +106,15 @@ class ReplayPolicy:
         start = self.task.state_from_observation(self.recorded.states[which, 0].double().cpu().numpy())
         return OpenLoopPolicy(actions), start
 
+    def without_noise(self) -> ReplayPolicy | None:
+        """The recorded trajectories replayed as they were executed (no action noise): how the real data were
+        driven, the pairs the posterior's spread is calibrated and checked on; the same seed. None where there is no
+        noise to take away."""
+        if self.cfg.action_noise == 0:
+            return None
+        return ReplayPolicy(dataclasses.replace(self.cfg, action_noise=0.0), self.recorded, self.task,
+                            int(self.generator.initial_seed()))
+
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         raise ConfigError("policy=replay drives batches of simulations through SimulatorPool.rollout "
                           "(its plan fixes each simulation's start), not step by step")

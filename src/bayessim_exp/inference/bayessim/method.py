@@ -133,11 +133,26 @@ class BayesSim(InferenceMethod):
 
     # stages --------------------------------------------------------------------------
     def collect(self, ctx: RoundContext) -> dict:
+        """The round's simulations under the collect policy. Where that policy replays the real trajectories with
+        noise, the last rows (twice the held-out share) replay them as they were executed: the pairs the spread is
+        calibrated on and the held-out pairs, drawn like the real data (docs/statistics.md, 'Simulations driven
+        like the real system')."""
         rc = self.comp.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
-        traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), rc.collect.horizon, ctx.seed,
-                                      rc.logging.progress)
-        return {"theta": theta.float(), "traj": traj.state_dict()}
+        policy = self.comp.policy(ctx.seed, ctx)
+        exact = self._without_noise(policy)
+        n_exact = 0 if exact is None else 2 * self._held_out_count(len(theta))
+        cut = len(theta) - n_exact
+        traj = self.comp.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)
+        if n_exact:
+            exact_seed = stage_seed(ctx.run_seed, ctx.round, "collect_exact")
+            traj = Trajectories.cat([traj, self.comp.sims.rollout(theta[cut:], exact, rc.collect.horizon, exact_seed)])
+        return {"theta": theta.float(), "traj": traj.state_dict(), "exact": torch.arange(len(theta)) >= cut}
+
+    @staticmethod
+    def _without_noise(policy):
+        """The collect policy as the real data were driven (policies.ReplayPolicy.without_noise), or None."""
+        return policy.without_noise() if hasattr(policy, "without_noise") else None
 
     def summarize(self, ctx: RoundContext) -> dict:
         collected = ctx.output("collect")
@@ -146,7 +161,9 @@ class BayesSim(InferenceMethod):
         x = self.comp.summarizer(traj.select(keep)).cpu()
         finite = torch.isfinite(x).all(1)
         theta = collected["theta"][keep.cpu()][finite]
-        return {"theta": theta, "x": x[finite], "diverged": int((~keep).sum()) + int((~finite).sum())}
+        exact = collected.get("exact", torch.zeros(len(keep), dtype=torch.bool))[keep.cpu()][finite]
+        return {"theta": theta, "x": x[finite], "exact": exact,
+                "diverged": int((~keep).sum()) + int((~finite).sum())}
 
     def identifiability(self, ctx: RoundContext) -> dict:
         """What the round's summaries can say about each parameter (diagnostics/identifiability.py): the linear read
@@ -211,7 +228,10 @@ class BayesSim(InferenceMethod):
         # one factor per parameter fitted to rounds pooled from several proposals would fit the wide early ones
         latest = torch.zeros(len(theta), dtype=torch.bool)
         latest[len(theta) - len(data[-1][0]):] = True
-        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest)
+        # simulations replayed as the real data were driven are kept for the calibration alone
+        exact = torch.cat([self._exact_training_rows(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)])
+        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest,
+                            calibration_only=exact if bool((exact & latest).any()) else None)
         ctx.tb.losses(r, history)
         theta_val, x_val = data[-1][2], data[-1][3]
         d = self.comp.rc.diagnostics
@@ -238,11 +258,19 @@ class BayesSim(InferenceMethod):
     def _fitted_prior(self) -> ParameterDistribution:
         return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
+    def _held_out_count(self, n: int) -> int:
+        return int(self.comp.rc.diagnostics.held_out_fraction * n)
+
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
         """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
-        n_val = int(self.comp.rc.diagnostics.held_out_fraction * len(summary["theta"]))
-        cut = len(summary["theta"]) - n_val
+        cut = len(summary["theta"]) - self._held_out_count(len(summary["theta"]))
         return summary["theta"][:cut], summary["x"][:cut], summary["theta"][cut:], summary["x"][cut:]
+
+    def _exact_training_rows(self, summary: dict) -> torch.Tensor:
+        """[rows of _split's training part] bool: those replayed as the real data were driven (collect)."""
+        n = len(summary["theta"])
+        exact = summary.get("exact", torch.zeros(n, dtype=torch.bool))  # absent from rounds summarized before
+        return exact[: n - self._held_out_count(n)]
 
     def _fitted_model(self, ctx: RoundContext):
         model = self.comp.model()
@@ -328,9 +356,10 @@ class BayesSim(InferenceMethod):
                                 self.probit)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """One trajectory at each theta [K, D] under the collect policy: (kept [K]: neither diverged nor with a
-        non-finite summary, summaries [K, F] in float64)."""
-        traj = self.comp.sims.rollout(theta, self.comp.policy(seed, ctx), self.comp.rc.collect.horizon, seed)
+        """One trajectory at each theta [K, D] under the collect policy, driven as the real data were where it replays
+        them (collect): (kept [K]: neither diverged nor with a non-finite summary, summaries [K, F] in float64)."""
+        policy = self.comp.policy(seed, ctx)
+        traj = self.comp.sims.rollout(theta, self._without_noise(policy) or policy, self.comp.rc.collect.horizon, seed)
         x = self._summaries(traj).double()
         return ~traj.diverged.cpu() & torch.isfinite(x).all(-1), x
 

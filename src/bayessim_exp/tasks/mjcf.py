@@ -153,7 +153,7 @@ class MjcfTask(Task):
         for s in _named(m, mujoco.mjtObj.mjOBJ_SENSOR, m.nsensor, cfg.sensors, "sensors"):
             if m.sensor_needstage[s] > int(mujoco.mjtStage.mjSTAGE_VEL):
                 # the simulators recompute positions and velocities after a step, not accelerations and forces
-                raise ConfigError(f"sensors: {m.sensor(s).name!r} ({mujoco.mjtSensor(m.sensor_type[s]).name[8:].lower()}) "
+                raise ConfigError(f"sensors: {m.sensor(s).name!r} ({mujoco.mjtSensor(m.sensor_type[s]).name[7:].lower()}) "
                                   "reads accelerations or forces; only position and velocity sensors can be observed")
             sensor_cols += range(m.sensor_adr[s], m.sensor_adr[s] + m.sensor_dim[s])
             names += _entry_names(m.sensor(s).name, int(m.sensor_dim[s]))

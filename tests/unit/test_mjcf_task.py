@@ -187,6 +187,7 @@ BAD = {  # YAML changes -> what the one error says
                            r"reward.targets: unknown observation 'elbw_pos' \(did you mean elbow_pos"),
     "termination observation": ({"termination": {"tip_z": [-1, 1]}}, "termination: unknown observation 'tip_z'"),
     "termination bounds": ({"termination": {"tip_pos_2": [1, -1]}}, r"termination.tip_pos_2 must be \[low, high\]"),
+    "termination scalar": ({"termination": {"tip_pos_2": 1.0}}, r"termination.tip_pos_2 must be \[low, high\].*got 1.0"),
     "real_params name": ({"real_params": {"elbow_damp": 0.2}}, r"real_params names unknown parameters \['elbow_damp'\]"),
     "nominal outside the range": ({"parameters": {"m": {"range": [1.0, 2.0], "nominal": 0.5, "targets": ["body_mass[forearm]"]}}},
                                   r"real_params.m=0.5 \(its nominal value.*outside its range"),

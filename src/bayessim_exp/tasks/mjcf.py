@@ -72,8 +72,9 @@ class MjcfConfig(TaskConfig):
             raise ConfigError(f"reward.targets and reward.weights must name the same observations; targets: "
                               f"{sorted(self.reward.targets)}, weights: {sorted(self.reward.weights)}")
         for name, bounds in self.termination.items():
-            if len(bounds) != 2 or not float(bounds[0]) < float(bounds[1]):
-                raise ConfigError(f"termination.{name} must be [low, high] with low < high, got {list(bounds)}")
+            numbers = isinstance(bounds, list) and all(isinstance(b, (int, float)) for b in bounds)
+            if not numbers or len(bounds) != 2 or not bounds[0] < bounds[1]:
+                raise ConfigError(f"termination.{name} must be [low, high] with low < high, got {bounds!r}")
 
 
 def model_file(xml: str) -> Path:
@@ -130,6 +131,32 @@ def _entry_names(base: str, width: int) -> list[str]:
     return [base] if width == 1 else [f"{base}_{k}" for k in range(width)]
 
 
+def _observation_layout(m: mujoco.MjModel, cfg: MjcfConfig) -> tuple[list[str], tuple[np.ndarray, ...]]:
+    """The observation's names, and the qpos, qvel and sensordata addresses its entries are read from (in
+    that order: positions, velocities, sensors)."""
+    names: list[str] = []
+    qpos_cols, qvel_cols, sensor_cols = [], [], []
+    for j in _named(m, mujoco.mjtObj.mjOBJ_JOINT, m.njnt, cfg.qpos, "qpos"):
+        width = _QPOS_WIDTH[mujoco.mjtJoint(m.jnt_type[j])]
+        qpos_cols += range(m.jnt_qposadr[j], m.jnt_qposadr[j] + width)
+        names += _entry_names(f"{m.joint(j).name}_pos", width)
+    for j in _named(m, mujoco.mjtObj.mjOBJ_JOINT, m.njnt, cfg.qvel, "qvel"):
+        width = _DOF_WIDTH[mujoco.mjtJoint(m.jnt_type[j])]
+        qvel_cols += range(m.jnt_dofadr[j], m.jnt_dofadr[j] + width)
+        names += _entry_names(f"{m.joint(j).name}_vel", width)
+    for s in _named(m, mujoco.mjtObj.mjOBJ_SENSOR, m.nsensor, cfg.sensors, "sensors"):
+        if m.sensor_needstage[s] > int(mujoco.mjtStage.mjSTAGE_VEL):
+            # the simulators recompute positions and velocities after a step, not accelerations and forces
+            raise ConfigError(f"sensors: {m.sensor(s).name!r} ({mujoco.mjtSensor(m.sensor_type[s]).name[7:].lower()}) "
+                              "reads accelerations or forces; only position and velocity sensors can be observed")
+        sensor_cols += range(m.sensor_adr[s], m.sensor_adr[s] + m.sensor_dim[s])
+        names += _entry_names(m.sensor(s).name, int(m.sensor_dim[s]))
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:
+        raise ConfigError(f"observation names {clash} occur twice (a sensor named like a joint's _pos/_vel entry)")
+    return names, tuple(np.array(c, int) for c in (qpos_cols, qvel_cols, sensor_cols))
+
+
 @register("task", "mjcf", MjcfConfig)
 class MjcfTask(Task):
     name = "mjcf"
@@ -138,32 +165,9 @@ class MjcfTask(Task):
         self.cfg = cfg  # model_path reads it before Task.__init__ loads the model
         super().__init__(cfg)
         m = self.model
-        names: list[str] = []
-        # observed joints: (qpos or qvel address, observation name) per entry
-        qpos_cols, qvel_cols = [], []
-        for j in _named(m, mujoco.mjtObj.mjOBJ_JOINT, m.njnt, cfg.qpos, "qpos"):
-            jtype = mujoco.mjtJoint(m.jnt_type[j])
-            qpos_cols += [m.jnt_qposadr[j] + k for k in range(_QPOS_WIDTH[jtype])]
-            names += _entry_names(f"{m.joint(j).name}_pos", _QPOS_WIDTH[jtype])
-        for j in _named(m, mujoco.mjtObj.mjOBJ_JOINT, m.njnt, cfg.qvel, "qvel"):
-            jtype = mujoco.mjtJoint(m.jnt_type[j])
-            qvel_cols += [m.jnt_dofadr[j] + k for k in range(_DOF_WIDTH[jtype])]
-            names += _entry_names(f"{m.joint(j).name}_vel", _DOF_WIDTH[jtype])
-        sensor_cols = []
-        for s in _named(m, mujoco.mjtObj.mjOBJ_SENSOR, m.nsensor, cfg.sensors, "sensors"):
-            if m.sensor_needstage[s] > int(mujoco.mjtStage.mjSTAGE_VEL):
-                # the simulators recompute positions and velocities after a step, not accelerations and forces
-                raise ConfigError(f"sensors: {m.sensor(s).name!r} ({mujoco.mjtSensor(m.sensor_type[s]).name[7:].lower()}) "
-                                  "reads accelerations or forces; only position and velocity sensors can be observed")
-            sensor_cols += range(m.sensor_adr[s], m.sensor_adr[s] + m.sensor_dim[s])
-            names += _entry_names(m.sensor(s).name, int(m.sensor_dim[s]))
-        clash = sorted({n for n in names if names.count(n) > 1})
-        if clash:
-            raise ConfigError(f"observation names {clash} occur twice (a sensor named like a joint's _pos/_vel entry)")
+        names, (self._qpos_cols, self._qvel_cols, self._sensor_cols) = _observation_layout(m, cfg)
         self.obs_names = tuple(names)
-        self.data_fields = ("qpos", "qvel", "sensordata") if sensor_cols else ("qpos", "qvel")
-        self._qpos_cols, self._qvel_cols = np.array(qpos_cols, int), np.array(qvel_cols, int)
-        self._sensor_cols = np.array(sensor_cols, int)
+        self.data_fields = ("qpos", "qvel", "sensordata") if self._sensor_cols.size else ("qpos", "qvel")
         self._state_from_obs = self._state_columns()
 
         acts = _named(m, mujoco.mjtObj.mjOBJ_ACTUATOR, m.nu, cfg.actuators, "actuators")

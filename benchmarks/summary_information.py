@@ -9,8 +9,9 @@ Gaussian noise of --action-noise, clipped, from random reset states: `policy=rep
 from an observation); and replayed from its start (the same, all from the recording's initial state: what
 `policy=replay` does where it can). The recording is itself a random-policy trajectory. Per parameter it prints the
 held-out R^2 (the last fifth of the draws) of a ridge regression from the standardised summaries to the
-parameter's probit coordinate, the best of six ridge strengths: near 0, a linear read of these summaries says
-nothing about the parameter; a density model may still learn more than a linear one.
+parameter's probit coordinate, the best of six ridge strengths (diagnostics/identifiability.linear_read, what a run's
+identifiability report reads): near 0, a linear read of these summaries says nothing about the parameter; a density
+model may still learn more than a linear one.
 """
 
 from __future__ import annotations
@@ -19,22 +20,6 @@ import argparse
 
 import numpy as np
 import torch
-
-RIDGE = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5)  # the largest all but predicts the mean (R^2 near 0)
-
-
-def held_out_r2(x: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-    """Best held-out R^2 per column of u (the last fifth of the rows) over the ridge strengths, on standardised x
-    with its constant columns dropped (models/projection.RidgeSystem: intercept unpenalised)."""
-    from bayessim_exp.models.projection import RidgeSystem
-
-    sd = x.std(0)
-    z = (x[:, sd > 1e-9] - x[:, sd > 1e-9].mean(0)) / sd[sd > 1e-9]
-    system = RidgeSystem(z, u)
-    held = torch.arange(len(z)) >= int(0.8 * len(z))
-    residuals = torch.stack([(system.predict(held, system.solve(ridge, held)) - system.y[held]).pow(2).mean(0)
-                             for ridge in RIDGE])
-    return 1 - residuals.min(0).values / system.y[held].var(0, correction=0)
 
 
 def main() -> None:
@@ -47,6 +32,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from bayessim_exp import api, registry
+    from bayessim_exp.diagnostics.identifiability import linear_read
     from bayessim_exp.distributions.probit import ProbitTransform
     from bayessim_exp.policies import OpenLoopPolicy
     from bayessim_exp.sim.pool import SimulatorPool
@@ -77,7 +63,7 @@ def main() -> None:
                             args.seed, state=state)
         x = summarizer(traj).double().cpu()
         keep = ~traj.diverged.cpu() & torch.isfinite(x).all(1)
-        r2[name] = held_out_r2(x[keep], u[keep]).numpy()
+        r2[name] = np.array(list(linear_read(x[keep], u[keep], task.spec.names)["r2"].values()))
 
     print(f"{args.task}, summarizer {cfg.summarizer.name}, {n} prior draws, held-out R^2 per parameter:\n")
     print("| parameter | " + " | ".join(settings) + " |")

@@ -96,7 +96,8 @@ class ReplayPolicy:
         """For n simulations: the actions each replays and their initial states (None: the reset distribution)."""
         if self.recorded is None:
             raise ConfigError("policy=replay replays recorded real trajectories, and none is recorded yet: use it "
-                              "with real data that carry their actions (real=file), or another collect policy")
+                              "with real data that carry their actions (real=file, real=lerobot, real=csv), or another "
+                              "collect policy")
         which = torch.randint(self.recorded.num, (n,), generator=self.generator)
         actions = self.recorded.actions[which].float().cpu()
         if self.cfg.action_noise > 0:
@@ -104,6 +105,15 @@ class ReplayPolicy:
             actions = (actions + noise).clamp(-1.0, 1.0)
         start = self.task.state_from_observation(self.recorded.states[which, 0].double().cpu().numpy())
         return OpenLoopPolicy(actions), start
+
+    def without_noise(self) -> ReplayPolicy | None:
+        """The recorded trajectories replayed as they were executed (no action noise): how the real data were
+        driven, the pairs the posterior's spread is calibrated and checked on; the same seed. None where there is no
+        noise to take away."""
+        if self.cfg.action_noise == 0:
+            return None
+        return ReplayPolicy(dataclasses.replace(self.cfg, action_noise=0.0), self.recorded, self.task,
+                            int(self.generator.initial_seed()))
 
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         raise ConfigError("policy=replay drives batches of simulations through SimulatorPool.rollout "

@@ -50,6 +50,8 @@ _BUILTIN_MODULES = (
     "bayessim_exp.models.flow",
     "bayessim_exp.models.linear",
     "bayessim_exp.real",
+    "bayessim_exp.recorded.lerobot",
+    "bayessim_exp.recorded.csv_table",
     "bayessim_exp.inference.bayessim.method",
     "bayessim_exp.inference.simopt.method",
     "bayessim_exp.sim.native",

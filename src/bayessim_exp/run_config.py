@@ -33,6 +33,7 @@ class DiagnosticsConfig:
     mismatch_alpha: float  # significance of the model-mismatch tests
     extrapolation_alpha: float  # significance of the real data's distance from the training simulations (0: off)
     mismatch_distance_ratio: float  # replay distance, posterior over prior, above which a trajectory is unexplained
+    sensitivity_sims: int  # trajectories of the local sensitivity view at the nominal parameters, round 1 (0: off)
 
 
 @dataclasses.dataclass
@@ -81,12 +82,12 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
     d = rc.diagnostics
     if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
             or d.predictive_sims < 0 or d.replay_sims == 1 or d.replay_sims < 0 or d.combination_sets < 0
-            or d.local_sets < 0
+            or d.local_sets < 0 or d.sensitivity_sims < 0
             or not 0 < d.mismatch_alpha < 1 or not 0 <= d.extrapolation_alpha < 1
             or not 0 < d.mismatch_distance_ratio < 1):
         raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
                           "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0, diagnostics.combination_sets >= 0, "
-                          "diagnostics.local_sets >= 0, "
+                          "diagnostics.local_sets >= 0, diagnostics.sensitivity_sims >= 0, "
                           "diagnostics.replay_sims "
                           "0 or >= 2, 0 < diagnostics.mismatch_alpha < 1, 0 <= diagnostics.extrapolation_alpha < 1, "
                           "0 < diagnostics.mismatch_distance_ratio < 1")

@@ -25,6 +25,7 @@ RUN_ELSEWHERE = {
     "model=mdnn": "the default", "rl=none": "the default", "sim=auto": "the default", "real=surrogate": "the default",
     "method=simopt": "test_simopt_pipeline.py", "policy=rl_randomized": "test_rl_pipeline.py",
     "rl=ppo": "test_rl_pipeline.py", "real=file": "test_pipeline.py, test_real_data.py",
+    "real=lerobot": "test_real_logs_pipeline.py", "real=csv": "test_real_logs_pipeline.py",
     "model=mdrff": "test_pipeline.py", "model=flow": "test_pipeline.py",
     "model=mdnn_projected_diagonal": "task=Cartpole, task=Ant", "model=mdnn_projected_diagonal_ensemble":
         "task=ShadowHand_more", "model=mdnn_projected_diagonal_one_component": "task=Humanoid",

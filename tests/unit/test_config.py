@@ -12,6 +12,7 @@ from omegaconf import OmegaConf
 
 from bayessim_exp import registry
 from bayessim_exp.pipeline import Pipeline
+from robot_logs import NAMES, pendulum_frames, write_csv, write_lerobot
 
 ROOT = Path(__file__).resolve().parents[2]
 CONF = ROOT / "conf"
@@ -19,10 +20,14 @@ OPTIONS = [(g, p.stem) for g in registry.GROUPS for p in sorted((CONF / g).glob(
 
 
 @pytest.fixture
-def real_file(tmp_path):
-    path = tmp_path / "pendulum.npz"
-    np.savez(path, states=np.zeros((1, 51, 3)), actions=np.zeros((1, 50, 1)))
-    return path
+def real_paths(tmp_path):
+    """A Pendulum log of 50 steps at rest for each option of `real` that reads one."""
+    states, actions = np.tile([1.0, 0.0, 0.0], (1, 51, 1)), np.zeros((1, 50, 1))
+    np.savez(tmp_path / "pendulum.npz", states=states, actions=actions)
+    table = {"time": np.arange(51) * 0.05, "cos_theta": states[0, :, 0], "sin_theta": states[0, :, 1],
+             "theta_dot": states[0, :, 2], "torque": np.zeros(51)}
+    return {"file": tmp_path / "pendulum.npz", "csv": write_csv(tmp_path / "pendulum.csv", table),
+            "lerobot": write_lerobot(tmp_path / "lerobot", pendulum_frames(states, actions), NAMES)}
 
 
 EXPERIMENTS = [("experiment", p.stem) for p in sorted((CONF / "experiment").glob("*.yaml"))]
@@ -30,11 +35,11 @@ EXPERIMENTS = [("experiment", p.stem) for p in sorted((CONF / "experiment").glob
 
 @pytest.mark.parametrize("budget", [[], ["debug=smoke"]], ids=["default", "smoke"])
 @pytest.mark.parametrize("group, name", OPTIONS + EXPERIMENTS)
-def test_every_option_builds(compose, tmp_path, real_file, group, name, budget):
+def test_every_option_builds(compose, tmp_path, real_paths, group, name, budget):
     """What the pipeline checks and builds before simulating (Pipeline.__init__: the run's keys, every component
     with its parameters), for each option varied alone from the defaults, and under debug=smoke: a debug budget
     may not name a key that an option lacks (model=linear has no epochs: conf/model_debug)."""
-    extra = [f"real.path={real_file}"] if (group, name) == ("real", "file") else []
+    extra = [f"real.path={real_paths[name]}"] if group == "real" and name in real_paths else []
     Pipeline(compose([f"{group}={name}", *extra, *budget]), tmp_path)
 
 

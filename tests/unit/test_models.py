@@ -238,3 +238,36 @@ def test_the_common_factor_multiplies_every_parameters_spread(monkeypatch):
         covariances[factor] = model.conditional(x[0]).covariance
     assert torch.allclose(found[1.5], 1.5 * found[1.0], rtol=1e-5)
     assert torch.allclose(covariances[1.5], 2.25 * covariances[1.0], rtol=1e-4)
+
+
+@pytest.mark.parametrize("name", ["mdnn", "mdrff"])
+def test_the_spread_is_calibrated_on_the_calibration_only_pairs_which_are_never_trained_on(name):
+    """Simulations replayed with action noise and the real data replayed as executed (policy=replay): here the
+    training pairs have their parameters blurred by noise as wide as the exact posterior, so the network learns
+    sqrt(2) times the exact spread, and the calibration-only pairs are exact. Calibrated on those, the factors come
+    out near 1 / sqrt(2); had the exact pairs been trained on, the network's own spread would lie nearer 1."""
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 6000, seed=0)
+    x = SIM.simulate(theta, seed=1)
+    exact = torch.arange(6000) >= 4000
+    _, cov = SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[:1])
+    blurred = theta + gaussian_draws(torch.zeros(2), cov, 6000, seed=3)
+    theta = torch.where(exact[:, None], theta, blurred)
+    model = build("model", {"name": name, **CONFIGS[name]}, theta_dim=2, x_dim=3)
+    history = model.fit(theta, x, seed=0, label="test", calibration_rows=torch.ones(6000, dtype=torch.bool),
+                        calibration_only=exact)
+    factors = torch.tensor(history["spread_scale"])
+    assert ((factors * 2**0.5 - 1).abs() < 0.12).all(), factors
+    _, got = _moments(model.conditional(x[0].float()))
+    ratio = got / cov.diagonal().sqrt()  # the module's tolerance for standard deviations
+    assert ((ratio > 0.75) & (ratio < 1.33)).all(), ratio
+
+
+def test_the_linear_model_takes_its_covariance_from_the_calibration_only_pairs():
+    theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 6000, seed=0)
+    x = SIM.simulate(theta, seed=1)
+    exact = torch.arange(6000) >= 4000
+    _, cov = SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[:1])
+    theta = torch.where(exact[:, None], theta, theta + gaussian_draws(torch.zeros(2), cov, 6000, seed=3))
+    model = build("model", {"name": "linear"}, theta_dim=2, x_dim=3)
+    model.fit(theta, x, seed=0, label="test", calibration_only=exact)
+    assert ((model.cov.diagonal() / cov.diagonal() - 1).abs() < 0.15).all(), (model.cov, cov)

@@ -169,6 +169,30 @@ def replay_plot(real: np.ndarray, posterior: np.ndarray, prior: np.ndarray, obs_
     return fig
 
 
+def identifiability_plot(names: list[str], r2: list[float], rms: list[float] | None, title: str) -> plt.Figure:
+    """Per parameter: the held-out R^2 of the summaries' linear read and, in round 1, the local sensitivity at the
+    nominal parameters (red: below NO_EFFECT, the parameter moves nothing)."""
+    from ..diagnostics.identifiability import NO_EFFECT
+
+    views = 1 if rms is None else 2
+    fig, axes = plt.subplots(1, views, figsize=(4.5 * views + 1.5, 0.22 * len(names) + 1.6), squeeze=False, sharey=True)
+    ticks = np.arange(len(names))
+    axes[0, 0].barh(ticks, np.clip(r2, -0.1, 1.0), color="C0")  # an overfit read below 0 says as little as 0
+    axes[0, 0].set_xlim(-0.1, 1.0)
+    axes[0, 0].set_xlabel("held-out R$^2$ of a linear read of the summaries\n(a lower bound on the expected contraction)")
+    axes[0, 0].set_yticks(ticks, names, fontsize=7)
+    axes[0, 0].invert_yaxis()
+    if rms is not None:
+        ax = axes[0, 1]
+        ax.barh(ticks, np.maximum(rms, 1e-6), color=["C3" if v < NO_EFFECT else "C0" for v in rms])
+        ax.axvline(NO_EFFECT, color="0.4", ls="--", lw=1)
+        ax.set_xscale("log")
+        ax.set_xlabel("summaries moved per prior std at the nominal\n(RMS, standardised; red: no effect)")
+    fig.suptitle(f"identifiability, {title}", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
 def _lines(t: np.ndarray, ys: np.ndarray, **style) -> LineCollection:
     """The rows of ys [k, T] over t [T] as one artist."""
     return LineCollection(np.stack([np.broadcast_to(t, ys.shape), ys], -1), **style)

@@ -122,6 +122,12 @@ class TensorBoardLogger:
                      np.asarray(high)[idx], None if true is None else true[idx], f"posterior, round {round_index}",
                      prior_samples)
 
+    def identifiability(self, round_index: int, names: list[str], report: dict) -> None:
+        """The identifiability report (diagnostics/identifiability.py) as bars per parameter."""
+        local = report["local"]
+        self._figure("identifiability", round_index, "identifiability_plot", names, [report["r2"][n] for n in names],
+                     None if local is None else [local["rms"][n] for n in names], f"round {round_index}")
+
     def image(self, tag: str, encoded: bytes, step: int) -> None:
         """An encoded image (PNG; an animated GIF, which TensorBoard's IMAGES tab plays, without moviepy)
         as an image summary, as it is."""

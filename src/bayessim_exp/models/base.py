@@ -18,10 +18,12 @@ from .adam_steps import adam_steps
 class PosteriorModel(Protocol):
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "",
             on_epoch: Callable[[int, float, float], None] | None = None,
-            calibration_rows: torch.Tensor | None = None) -> dict:
+            calibration_rows: torch.Tensor | None = None, calibration_only: torch.Tensor | None = None) -> dict:
         """`calibration_rows` ([N] bool): the pairs drawn like those the posterior will be used on (the
         latest round's, when rounds pool simulations from several proposals); models calibrate their
-        spread on the validation pairs among them. None: every pair."""
+        spread on the validation pairs among them. None: every pair. `calibration_only` ([N] bool): pairs
+        simulated as the real data were (replays without the collect policy's noise), never trained on nor
+        read by early stopping; where given, the spread is calibrated on those among `calibration_rows`."""
 
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture: ...
 
@@ -118,10 +120,11 @@ class StandardizedDensityModel:
         raise NotImplementedError
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
-            calibration_rows: torch.Tensor | None = None) -> dict:
+            calibration_rows: torch.Tensor | None = None, calibration_only: torch.Tensor | None = None) -> dict:
         """Trains where `x` lives (a GPU when the pipeline runs with device=cuda); the fitted network
         goes back to the CPU, where its state is saved and the posteriors are built. With cfg.calibrate
-        the spread is fitted on the validation pairs among `calibration_rows` (PosteriorModel.fit).
+        the spread is fitted on the validation pairs among `calibration_rows`, or on the `calibration_only` pairs
+        among them (PosteriorModel.fit).
         Fine-tuning on rows that extend the previous fit's (rounds pooled in order) keeps their roles in
         the validation split (`validation_split`): early stopping and the calibration never read a pair
         the network was trained on in an earlier round."""
@@ -143,10 +146,15 @@ class StandardizedDensityModel:
                     inputs = self.inputs(x)
             theta_std = self.theta_norm(theta)
             val_idx, train_idx = validation_split(len(theta), self.cfg.val_fraction, self.split_seed, label)
+            if calibration_only is not None:  # after the split, so that every other row keeps its role
+                only = calibration_only.cpu()
+                val_idx, train_idx = val_idx[~only[val_idx]], train_idx[~only[train_idx]]
             history = train_density(self.net, self._nll, theta_std, inputs, val_idx, train_idx, self.cfg,
                                     seed=seed, label=label, on_epoch=on_epoch)
             if self.cfg.calibrate:  # fine-tuning starts from the network's own spread, not the last factors
                 self.spread.log_scale.zero_()
+                if calibration_only is not None:
+                    val_idx = only.nonzero()[:, 0]
                 val_idx = calibration_pairs(val_idx, calibration_rows).to(x.device)
                 if len(val_idx):
                     history.update(self._calibrate(theta_std[val_idx], inputs[val_idx], seed))

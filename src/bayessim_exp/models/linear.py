@@ -48,7 +48,7 @@ class LinearGaussian:
         return -float(torch.distributions.MultivariateNormal(torch.zeros_like(residual[0]), cov).log_prob(residual).mean())
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
-            calibration_rows: torch.Tensor | None = None) -> dict:
+            calibration_rows: torch.Tensor | None = None, calibration_only: torch.Tensor | None = None) -> dict:
         theta, x = theta.double(), x.double()
         n = len(theta)
         n_val = max(1, int(round(self.cfg.val_fraction * n)))
@@ -58,18 +58,22 @@ class LinearGaussian:
         z = (x - self.shift) / self.scale
         val = torch.zeros(n, dtype=torch.bool)
         val[torch.randperm(n, generator=torch.Generator().manual_seed(seed))[:n_val]] = True
+        only = torch.zeros(n, dtype=torch.bool) if calibration_only is None else calibration_only.cpu()
+        val &= ~only
         # the covariance from the held-out pairs drawn like the ones conditioned on, where enough of them are
-        spread = val if calibration_rows is None else val & calibration_rows.cpu()
-        spread = spread[val] if int(spread.sum()) > self.theta_dim else torch.ones(n_val, dtype=torch.bool)
+        held = val | only
+        spread = (only if calibration_only is not None else val) & (True if calibration_rows is None
+                                                                      else calibration_rows.cpu())
+        spread = spread[held] if int(spread.sum()) > self.theta_dim else val[held]
         system = RidgeSystem(z, theta)
         theta_scale = theta.std(0).clamp_min(1e-12)
         scores, covs = [], []
         for penalty in self.cfg.penalties:
-            resid_val = theta[val] - system.predict(val, system.solve(penalty, val))
-            covs.append(torch.cov(resid_val[spread].T).reshape(self.theta_dim, self.theta_dim))
-            scores.append(float((resid_val / theta_scale).pow(2).mean()))
+            resid_held = theta[held] - system.predict(held, system.solve(penalty, held))
+            covs.append(torch.cov(resid_held[spread].T).reshape(self.theta_dim, self.theta_dim))
+            scores.append(float((resid_held[val[held]] / theta_scale).pow(2).mean()))
         best = min(range(len(scores)), key=scores.__getitem__)
-        self.weights = system.solve(self.cfg.penalties[best])
+        self.weights = system.solve(self.cfg.penalties[best], only if calibration_only is not None else None)
         self.cov = covs[best]
         train_nll = self._gaussian_nll(theta - _predict(z, self.weights), self.cov)
         val_nll = self._gaussian_nll(theta[val] - system.predict(val, self.weights), self.cov)

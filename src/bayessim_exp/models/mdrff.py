@@ -108,12 +108,13 @@ class MDRFF(MDNN):
                                   **({} if self.projection is None else {"projection": self.projection})})
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,
-            calibration_rows: torch.Tensor | None = None) -> dict:
+            calibration_rows: torch.Tensor | None = None, calibration_only: torch.Tensor | None = None) -> dict:
         if not self.fitted:  # frequencies are drawn once, with the first fit's seed, and then kept
             c = self.cfg
             self.rff.frequencies.copy_(spectral_frequencies(self.feature_in_dim, c.features // 2, c.kernel, c.lengthscale,
                                                             c.quasi_random, seed))
-        return super().fit(theta, x, seed=seed, label=label, on_epoch=on_epoch, calibration_rows=calibration_rows)
+        return super().fit(theta, x, seed=seed, label=label, on_epoch=on_epoch, calibration_rows=calibration_rows,
+                           calibration_only=calibration_only)
 
 
 @register("model", "mdrff", MdrffConfig)

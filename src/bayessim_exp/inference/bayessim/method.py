@@ -2,8 +2,9 @@
 q(theta | x), condition on every real summary with the proposal's correction.
 
 Stages of a round: collect (parameters from the proposal, trajectories under the collect policy)
--> summarize -> fit (the posterior model, its spread calibrated and its coverage and gain measured on
-the round's own held-out simulations) -> condition (the posterior given all real trajectories,
+-> summarize -> identifiability (which parameters the summaries can pin down, diagnostics/identifiability.py)
+-> fit (the posterior model, its spread calibrated and its coverage and gain measured on the round's own
+held-out simulations) -> condition (the posterior given all real trajectories,
 docs/statistics.md, widened until the real trajectories lie among its replays where the task can
 replay them) -> model_check (predictive checks, the mismatch verdict) -> guard (what the round hands
 on: its posterior, or on a failed check the last one that passed, method.on_guard).
@@ -15,11 +16,13 @@ import dataclasses
 import logging
 from collections.abc import Callable
 
+import numpy as np
 import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
 from ...diagnostics.extrapolation import inputs_outside
 from ...diagnostics.guard import ACTIONS, check_posterior
+from ...diagnostics.identifiability import STEP, linear_read, sensitivity
 from ...diagnostics.local_coverage import local_coverage
 from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
@@ -30,6 +33,8 @@ from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
 from ...errors import ConfigError, PosteriorError
+from ...models.base import column_scale
+from ...policies import OpenLoopPolicy, RandomPolicy
 from ...registry import register
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
@@ -88,6 +93,7 @@ class BayesSim(InferenceMethod):
         return [
             Stage("collect", self.collect, transient=not self.comp.rc.collect.keep_trajectories),
             Stage("summarize", self.summarize, inputs=("collect",)),
+            Stage("identifiability", self.identifiability, inputs=("summarize",)),
             Stage("fit", self.fit, inputs=("summarize",)),
             Stage("condition", self.condition, inputs=("real", "fit")),
             Stage("model_check", self.model_check, inputs=("real", "summarize", "fit", "condition")),
@@ -127,11 +133,26 @@ class BayesSim(InferenceMethod):
 
     # stages --------------------------------------------------------------------------
     def collect(self, ctx: RoundContext) -> dict:
+        """The round's simulations under the collect policy. Where that policy replays the real trajectories with
+        noise, the last rows (twice the held-out share) replay them as they were executed: the pairs the spread is
+        calibrated on and the held-out pairs, drawn like the real data (docs/statistics.md, 'Simulations driven
+        like the real system')."""
         rc = self.comp.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
-        traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), rc.collect.horizon, ctx.seed,
-                                      rc.logging.progress)
-        return {"theta": theta.float(), "traj": traj.state_dict()}
+        policy = self.comp.policy(ctx.seed, ctx)
+        exact = self._without_noise(policy)
+        n_exact = 0 if exact is None else 2 * self._held_out_count(len(theta))
+        cut = len(theta) - n_exact
+        traj = self.comp.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)
+        if n_exact:
+            exact_seed = stage_seed(ctx.run_seed, ctx.round, "collect_exact")
+            traj = Trajectories.cat([traj, self.comp.sims.rollout(theta[cut:], exact, rc.collect.horizon, exact_seed)])
+        return {"theta": theta.float(), "traj": traj.state_dict(), "exact": torch.arange(len(theta)) >= cut}
+
+    @staticmethod
+    def _without_noise(policy):
+        """The collect policy as the real data were driven (policies.ReplayPolicy.without_noise), or None."""
+        return policy.without_noise() if hasattr(policy, "without_noise") else None
 
     def summarize(self, ctx: RoundContext) -> dict:
         collected = ctx.output("collect")
@@ -140,7 +161,59 @@ class BayesSim(InferenceMethod):
         x = self.comp.summarizer(traj.select(keep)).cpu()
         finite = torch.isfinite(x).all(1)
         theta = collected["theta"][keep.cpu()][finite]
-        return {"theta": theta, "x": x[finite], "diverged": int((~keep).sum()) + int((~finite).sum())}
+        exact = collected.get("exact", torch.zeros(len(keep), dtype=torch.bool))[keep.cpu()][finite]
+        return {"theta": theta, "x": x[finite], "exact": exact,
+                "diverged": int((~keep).sum()) + int((~finite).sum())}
+
+    def identifiability(self, ctx: RoundContext) -> dict:
+        """What the round's summaries can say about each parameter (diagnostics/identifiability.py): the linear read
+        of its training simulations, and in round 1 the local sensitivity at the nominal parameters, whose
+        parameters that move nothing are said before any fit."""
+        theta, x, _, _ = self._split(ctx.output("summarize"))
+        d, names = self.comp.rc.diagnostics, self.comp.task.spec.names
+        report = {**linear_read(x, self._fitted_space(theta), names), "local": None}
+        for entry in report["trade_offs"]:
+            log.info("round %d: %s and %s are told apart only in part (held-out prediction errors correlate %+.2f)",
+                     ctx.round, *entry["pair"], entry["correlation"])
+        if d.sensitivity_sims and ctx.round == 1:
+            report["local"] = local = sensitivity(lambda points: self._summaries_at(ctx, points), self._nominal(),
+                                                  column_scale(x.double()), names)
+            if local["no_effect"]:
+                log.warning("round 1: %s move no summary at the nominal parameters (local sensitivity): the data "
+                            "cannot identify them, and their posterior stays at the prior", ", ".join(local["no_effect"]))
+            for entry in local["collinear"]:
+                log.warning("round 1: %s and %s act alike at the nominal parameters (collinearity index %.0f): the data "
+                            "pin down a combination of them", *entry["pair"], entry["index"])
+        ctx.tb.identifiability(ctx.round, names, report)
+        return report
+
+    def _nominal(self) -> torch.Tensor:
+        """The task's nominal parameters in units of the prior's standard deviation, kept a step inside the box."""
+        spec, std = self.comp.task.spec, self.comp.prior.stddev.double()
+        low, high = torch.as_tensor(spec.low) + STEP * std, torch.as_tensor(spec.high) - STEP * std
+        return torch.maximum(torch.minimum(torch.as_tensor(spec.nominal, dtype=torch.float64), high), low) / std
+
+    def _summaries_at(self, ctx: RoundContext, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """identifiability.sensitivity's simulations: `diagnostics.sensitivity_sims` action sequences and initial states
+        (the collect policy's where it acts open loop, uniform random actions otherwise), the same at every point of
+        points [K, D] (parameters in units of the prior's standard deviation): (summaries [K, M, F], kept [M])."""
+        m, horizon = self.comp.rc.diagnostics.sensitivity_sims, self.comp.rc.collect.horizon
+        policy, task = self.comp.policy(ctx.seed, ctx), self.comp.task
+        start = None
+        if hasattr(policy, "plan"):
+            policy, start = policy.plan(m)
+        actions = (policy.actions if isinstance(policy, OpenLoopPolicy) else
+                   (policy if hasattr(policy, "open_loop_actions") else RandomPolicy(task.action_dim, ctx.seed))
+                   .open_loop_actions(m, horizon))[:, :horizon]
+        if start is None:
+            start = task.reset_state(np.random.default_rng(ctx.seed), m)
+        k = len(points)
+        theta = points * self.comp.prior.stddev.double()
+        traj = self.comp.sims.rollout(theta.repeat_interleave(m, 0), OpenLoopPolicy(actions.repeat(k, 1, 1)), horizon,
+                                      ctx.seed, state={f: np.tile(v, (k,) + (1,) * (v.ndim - 1)) for f, v in start.items()})
+        x = self._summaries(traj).double().reshape(k, m, -1)
+        kept = ~traj.diverged.cpu().reshape(k, m).any(0) & torch.isfinite(x).all(-1).all(0)
+        return x, kept
 
     def fit(self, ctx: RoundContext) -> dict:
         r = ctx.round
@@ -155,7 +228,10 @@ class BayesSim(InferenceMethod):
         # one factor per parameter fitted to rounds pooled from several proposals would fit the wide early ones
         latest = torch.zeros(len(theta), dtype=torch.bool)
         latest[len(theta) - len(data[-1][0]):] = True
-        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest)
+        # simulations replayed as the real data were driven are kept for the calibration alone
+        exact = torch.cat([self._exact_training_rows(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)])
+        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest,
+                            calibration_only=exact if bool((exact & latest).any()) else None)
         ctx.tb.losses(r, history)
         theta_val, x_val = data[-1][2], data[-1][3]
         d = self.comp.rc.diagnostics
@@ -182,11 +258,19 @@ class BayesSim(InferenceMethod):
     def _fitted_prior(self) -> ParameterDistribution:
         return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
+    def _held_out_count(self, n: int) -> int:
+        return int(self.comp.rc.diagnostics.held_out_fraction * n)
+
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
         """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
-        n_val = int(self.comp.rc.diagnostics.held_out_fraction * len(summary["theta"]))
-        cut = len(summary["theta"]) - n_val
+        cut = len(summary["theta"]) - self._held_out_count(len(summary["theta"]))
         return summary["theta"][:cut], summary["x"][:cut], summary["theta"][cut:], summary["x"][cut:]
+
+    def _exact_training_rows(self, summary: dict) -> torch.Tensor:
+        """[rows of _split's training part] bool: those replayed as the real data were driven (collect)."""
+        n = len(summary["theta"])
+        exact = summary.get("exact", torch.zeros(n, dtype=torch.bool))  # absent from rounds summarized before
+        return exact[: n - self._held_out_count(n)]
 
     def _fitted_model(self, ctx: RoundContext):
         model = self.comp.model()
@@ -272,9 +356,10 @@ class BayesSim(InferenceMethod):
                                 self.probit)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """One trajectory at each theta [K, D] under the collect policy: (kept [K]: neither diverged nor with a
-        non-finite summary, summaries [K, F] in float64)."""
-        traj = self.comp.sims.rollout(theta, self.comp.policy(seed, ctx), self.comp.rc.collect.horizon, seed)
+        """One trajectory at each theta [K, D] under the collect policy, driven as the real data were where it replays
+        them (collect): (kept [K]: neither diverged nor with a non-finite summary, summaries [K, F] in float64)."""
+        policy = self.comp.policy(seed, ctx)
+        traj = self.comp.sims.rollout(theta, self._without_noise(policy) or policy, self.comp.rc.collect.horizon, seed)
         x = self._summaries(traj).double()
         return ~traj.diverged.cpu() & torch.isfinite(x).all(-1), x
 
@@ -405,6 +490,7 @@ class BayesSim(InferenceMethod):
             "proposal": self.proposal_name(ctx),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],
+            "identifiability": {k: v for k, v in ctx.output("identifiability").items() if k != "seconds"},
             "guard": {**{k: guard[k] for k in ("ok", "failed", "warnings", "action")},
                       "handed_on": _round_name(guard["handed_on"])},
             "dispersion": conditioned["dispersion"],

@@ -213,3 +213,28 @@ def test_model_errors_are_config_errors(tmp_path):
     broken.write_text(textwrap.dedent(BALL).replace("</worldbody>", ""))
     with pytest.raises(ConfigError, match="MuJoCo cannot load .*broken.xml"):
         build({**ball, "xml": str(broken)})
+
+
+def test_a_csv_log_of_the_driven_actuators_alone_reads_back(compose, tmp_path):
+    """A log holds the observations and the commands of the actuators the actions drive (here the elbow alone,
+    in N m): it reads back as the simulated trajectories, the commands normalised by that actuator's ctrlrange."""
+    import csv
+
+    task = build(arm_cfg(actuators=["elbow_motor"]))
+    assert task.action_names == ("elbow_motor",) and list(task.actuators) == [1]
+    rng = np.random.default_rng(0)
+    traj = pool(task).get(2).rollout(np.repeat([[0.2, 0.7]], 2, 0), RandomPolicy(1, 2), 25,
+                                     state=task.reset_state(rng, 2))
+    states, actions = traj.states.double().numpy(), traj.actions.double().numpy()
+    for e in range(2):
+        torque = 1.5 * np.concatenate([actions[e, :, 0], actions[e, -1:, 0]])  # ctrlrange [-1.5, 1.5] N m
+        with (tmp_path / f"run{e}.csv").open("w", newline="") as f:
+            out = csv.writer(f)
+            out.writerow(["time", *task.obs_names, "elbow_motor"])
+            out.writerows([[t * 0.02, *states[e, t], torque[t]] for t in range(26)])
+    cfg = compose(["task=mjcf", "real=csv", f"real.path={tmp_path}"]).real
+    real = registry.build("real", cfg, task=task)
+    real.check(25)
+    got = real.collect(1, None, 25, 0)
+    torch.testing.assert_close(got.states, traj.states, atol=1e-5, rtol=0)
+    torch.testing.assert_close(got.actions, traj.actions, atol=1e-5, rtol=0)

@@ -154,8 +154,18 @@ class Task:
         return len(self.obs_names)
 
     @property
+    def actuators(self) -> np.ndarray:
+        """Ids of the actuators the actions drive, in action order: every actuator of the built-in tasks."""
+        return np.arange(self.model.nu)
+
+    @property
+    def action_names(self) -> tuple[str, ...]:
+        """The driven actuators' names (their index where the MJCF names none), in action order."""
+        return tuple(mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or str(i) for i in self.actuators)
+
+    @property
     def action_dim(self) -> int:
-        return self.model.nu
+        return len(self.actuators)
 
     @property
     def real_values(self) -> np.ndarray:

@@ -175,7 +175,7 @@ class MjcfTask(Task):
         if unlimited:
             raise ConfigError(f"actuators {unlimited} have no ctrlrange in the MJCF, and actions in [-1, 1] are "
                               "mapped onto it: give them ctrlrange (with ctrllimited) in the model")
-        self.action_names = tuple(m.actuator(a).name for a in acts)
+        self._actuators = np.array(acts, int)
         held = [m.actuator(a).name for a in range(m.nu) if a not in acts]
         if held:
             log.info("task=mjcf: actuators %s are not driven by the actions; their ctrl stays 0", held)
@@ -199,8 +199,8 @@ class MjcfTask(Task):
         return self.cfg.reward is not None
 
     @property
-    def action_dim(self) -> int:
-        return len(self.action_names)
+    def actuators(self) -> np.ndarray:
+        return self._actuators
 
     # set up ------------------------------------------------------------------------------------
     def _column(self, name: str, where: str) -> int:

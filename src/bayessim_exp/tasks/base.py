@@ -82,7 +82,7 @@ class TaskConfig:
 
 
 class Task:
-    """Base class. Subclasses set `name`, `xml`, `obs_names`, `data_fields` and the hooks."""
+    """Base class. Subclasses set `name`, `xml` (or override `model_path`), `obs_names`, `data_fields` and the hooks."""
 
     name: str = ""
     xml: str = ""  # file name under tasks/assets

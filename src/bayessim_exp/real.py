@@ -166,7 +166,7 @@ def load_trajectories(data: dict, task: Task, horizon: int, where: str) -> Traje
         raise DataError(f"{where}: states or actions contain NaN or inf")
     biggest = np.abs(actions).max(initial=0.0)
     if biggest > 1.0 + 1e-6:
-        lo, hi = task.model.actuator_ctrlrange.T
+        lo, hi = task.model.actuator_ctrlrange[task.actuators].T  # those the actions drive
         ranges = ", ".join(f"[{a:g}, {b:g}]" for a, b in zip(lo, hi))
         raise DataError(f"{where}: actions must be normalised to [-1, 1], max |a| = {biggest:.3g}; if they are "
                         f"actuator commands (e.g. torque), map each u in its control range ({ranges} for {task.name}) "

@@ -38,6 +38,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.tasks.shadow_hand",
     "bayessim_exp.tasks.anymal",
     "bayessim_exp.tasks.franka_cabinet",
+    "bayessim_exp.tasks.mjcf",
     "bayessim_exp.priors",
     "bayessim_exp.policies",
     "bayessim_exp.summarizers.basic",

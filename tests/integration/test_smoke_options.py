@@ -19,6 +19,7 @@ RUN_HERE = ["prior=loguniform", "prior=gaussian", "policy=fixed", "policy=rl", "
 # run end to end elsewhere: a whole group, or one option (the defaults run in nearly every test)
 RUN_ELSEWHERE = {
     "task": "test_tasks_pipeline.py, with each task's own summarizer and model (the mdnn_projected_* variants)",
+    "task=mjcf": "test_own_robot.py, README's commands through the CLI (the shipped arm; a task YAML of one's own, with a LeRobot log)",
     "summarizer": "test_summarizers_pipeline.py",
     "prior=uniform": "the default", "method=bayessim": "the default", "policy=random": "the default",
     "model=mdnn": "the default", "rl=none": "the default", "sim=auto": "the default", "real=surrogate": "the default",

@@ -22,7 +22,6 @@ import difflib
 import math
 import re
 
-import mujoco
 import numpy as np
 
 from ..errors import ConfigError, DataError
@@ -144,11 +143,10 @@ class Mapping:
                  schema: Schema, where: str):
         self.task, self.normalised = task, actions_normalised
         observations, actions = observations or {}, actions or {}  # null: every target by its own name
-        actuators = [mujoco.mj_id2name(task.model, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or str(i)
-                     for i in range(task.model.nu)]
+        actuators = list(task.action_names)
         self.obs = self._entries("observations", observations, task.obs_names, schema, where, action=False)
         self.actions = self._entries("actions", actions, actuators, schema, where, action=True)
-        lo, hi = task.model.actuator_ctrlrange.T
+        lo, hi = task.model.actuator_ctrlrange[task.actuators].T
         if not actions_normalised and (hi <= lo).any():
             raise ConfigError(f"{where}: actuators {[a for a, w in zip(actuators, hi - lo) if w <= 0]} of task "
                               f"{task.name} have no control range to map commands from; log normalised actions "

@@ -70,6 +70,9 @@ class PPOComponentConfig:
 @register("rl", "ppo", PPOComponentConfig)
 def ppo_component(cfg: PPOComponentConfig, comp, **_: object):
     """comp: the run's Components; the networks train on the run's `device`."""
+    if not comp.task.has_reward:
+        raise ConfigError(f"rl=ppo trains on the task's reward, and task={comp.task.name} defines none: give the "
+                          "task a reward (task=mjcf: its `reward` key), or run without RL (rl=none)")
     from .component import PPOComponent
 
     return PPOComponent(cfg, comp)

@@ -124,7 +124,7 @@ class ParamSpec:
     def nominal(self) -> np.ndarray:
         """Nominal values [D]: the MJCF as written for scaling (`nominal`) and additive (0) parameters;
         the YAML's `nominal` for set parameters."""
-        return np.array([0.0 if p.operation == "additive" else p.nominal for p in self.params])
+        return np.array([nominal_value(p.operation, p.nominal) for p in self.params])
 
     @classmethod
     def from_config(cls, parameters: dict[str, Any], model: mujoco.MjModel) -> ParamSpec:
@@ -170,6 +170,11 @@ class ParamSpec:
                         new = arr[idx] + (t.coef * v).reshape(bshape)
                     out[t.field] = _assign(arr, idx, new)
         return out
+
+
+def nominal_value(operation: str, nominal: float) -> float:
+    """The value of a parameter at which the model is the MJCF as written: 0 for additive ones."""
+    return 0.0 if operation == "additive" else float(nominal)
 
 
 def _model_fields(model: mujoco.MjModel) -> list[str]:

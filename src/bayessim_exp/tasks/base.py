@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from ..errors import ConfigError
-from ..sim.params import ParamConfig, ParamSpec
+from ..sim.params import ParamConfig, ParamSpec, nominal_value
 
 ASSETS = Path(__file__).parent / "assets"
 # what mjx_tuning may change (MJX_TUNING), the model first (MODEL_TUNING): solver iterations and line-search iterations (MjOption), MJX's contact
@@ -42,6 +42,7 @@ class TaskConfig:
     """Fields every task config has; tasks subclass it to add their own."""
 
     parameters: dict[str, ParamConfig]
+    # the surrogate 'real' system's hidden values; a parameter left out takes its nominal value (the MJCF as written)
     real_params: dict[str, float]
     control_dt: float
     episode_length: int
@@ -51,17 +52,14 @@ class TaskConfig:
     def validate(self) -> None:
         if not self.parameters:
             raise ConfigError("parameters is empty: declare at least one parameter to infer")
-        missing = [n for n in self.parameters if n not in self.real_params]
         extra = [n for n in self.real_params if n not in self.parameters]
-        if missing or extra:
-            raise ConfigError(
-                f"real_params must give a value for every parameter; missing {missing}, unknown {extra}; "
-                f"parameters: {', '.join(self.parameters)}"
-            )
-        for name, value in self.real_params.items():
+        if extra:
+            raise ConfigError(f"real_params names unknown parameters {extra}; parameters: {', '.join(self.parameters)}")
+        for name, value in self.real_param_values().items():
             low, high = self.parameters[name].range
             if not low <= value <= high:
-                raise ConfigError(f"real_params.{name}={value} lies outside its range [{low}, {high}]")
+                given = "" if name in self.real_params else " (its nominal value, as no real_params entry gives one)"
+                raise ConfigError(f"real_params.{name}={value}{given} lies outside its range [{low}, {high}]")
         unknown = set(self.mjx_tuning) - set(MJX_TUNING)
         if unknown:
             raise ConfigError(f"mjx_tuning: unknown keys {sorted(unknown)}; allowed: {', '.join(MJX_TUNING)}")
@@ -74,12 +72,21 @@ class TaskConfig:
         if self.control_dt <= 0 or self.episode_length < 1:
             raise ConfigError("control_dt must be > 0 and episode_length >= 1")
 
+    def real_param_values(self) -> dict[str, float]:
+        """Every parameter's surrogate-real value: real_params where given, else the nominal value."""
+        out = {}
+        for name, raw in self.parameters.items():
+            p = raw if isinstance(raw, ParamConfig) else ParamConfig(**raw)
+            out[name] = float(self.real_params.get(name, nominal_value(p.operation, p.nominal)))
+        return out
+
 
 class Task:
-    """Base class. Subclasses set `name`, `xml`, `obs_names`, `data_fields` and the hooks."""
+    """Base class. Subclasses set `name`, `xml` (or override `model_path`), `obs_names`, `data_fields` and the hooks."""
 
     name: str = ""
     xml: str = ""  # file name under tasks/assets
+    has_reward: bool = True  # False: the task defines no reward (rewards are 0) and RL refuses it
     obs_names: tuple[str, ...] = ()
     # MjData fields observe() reads; state fields (qpos, qvel, ...) are always current,
     # derived ones (xpos, sensordata, ...) make the simulator compute positions and velocities
@@ -99,7 +106,16 @@ class Task:
 
     @functools.cached_property
     def model(self) -> mujoco.MjModel:
-        return mujoco.MjModel.from_xml_path(str(ASSETS / self.xml))
+        path = self.model_path
+        try:
+            return mujoco.MjModel.from_xml_path(str(path))
+        except ValueError as exc:  # MuJoCo's parse and compile errors
+            raise ConfigError(f"MuJoCo cannot load {path}: {exc}") from None
+
+    @property
+    def model_path(self) -> Path:
+        """The MJCF file: `xml` under tasks/assets for the built-in tasks."""
+        return ASSETS / self.xml
 
     @functools.cached_property
     def mjx_model(self) -> mujoco.MjModel:
@@ -122,7 +138,7 @@ class Task:
     def _tuned(self, tuning: dict[str, Any]) -> mujoco.MjModel:
         if not set(tuning) & set(MODEL_TUNING):
             return self.model
-        spec = mujoco.MjSpec.from_file(str(ASSETS / self.xml))
+        spec = mujoco.MjSpec.from_file(str(self.model_path))
         for key in ("iterations", "ls_iterations"):
             if key in tuning:
                 setattr(spec.option, key, int(tuning[key]))
@@ -138,12 +154,23 @@ class Task:
         return len(self.obs_names)
 
     @property
+    def actuators(self) -> np.ndarray:
+        """Ids of the actuators the actions drive, in action order: every actuator of the built-in tasks."""
+        return np.arange(self.model.nu)
+
+    @property
+    def action_names(self) -> tuple[str, ...]:
+        """The driven actuators' names (their index where the MJCF names none), in action order."""
+        return tuple(mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or str(i) for i in self.actuators)
+
+    @property
     def action_dim(self) -> int:
-        return self.model.nu
+        return len(self.actuators)
 
     @property
     def real_values(self) -> np.ndarray:
-        return np.array([self.cfg.real_params[n] for n in self.spec.names])
+        values = self.cfg.real_param_values()
+        return np.array([values[n] for n in self.spec.names])
 
     def ctrl(self, action: Any, xp: Any = np) -> Any:
         """Normalised actions in [-1, 1] -> actuator controls in the ctrlrange (xp: the backend's array namespace)."""

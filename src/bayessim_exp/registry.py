@@ -51,6 +51,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.real",
     "bayessim_exp.inference.bayessim.method",
     "bayessim_exp.inference.simopt.method",
+    "bayessim_exp.inference.sysid.method",
     "bayessim_exp.sim.native",
     "bayessim_exp.sim.mjx",
     "bayessim_exp.sim.auto",

@@ -1,0 +1,96 @@
+"""MuJoCo's system identification as an inference method (`method=sysid`): one `fit` stage per round.
+
+The round fits the task's parameters (the ParamSpec BayesSim infers: same names, box and operations, written by
+sim/params.py) by least squares of every real trajectory recorded so far against its replay in simulation, from its
+recorded initial state (Task.state_from_observation) under its recorded actions, with mujoco.sysid's optimiser
+(fit.py). It hands out a Gaussian around the estimate (laplace.py) restricted to the prior's box: scored, plotted
+and used for domain randomization like a posterior. Round 1 starts at the prior's mean, later rounds at the previous
+round's estimate; each round fits all real data again, so the rounds do not multiply their information.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from ...distributions.base import ParameterDistribution
+from ...distributions.mixture import GaussianMixture, TruncatedMixture
+from ...errors import ConfigError, PosteriorError
+from ...registry import register
+from ...stages import RoundContext, Stage
+from ...tasks.base import Task
+from ..base import InferenceMethod, real_trajectories
+from .fit import INTERVAL_ALPHA, SysidConfig, fit, require_sysid
+from .laplace import laplace_gaussian
+from .residual import ReplayResidual
+
+
+class Sysid(InferenceMethod):
+    def __init__(self, cfg: SysidConfig, comp):
+        require_sysid()
+        task = comp.task
+        if type(task).state_from_observation is Task.state_from_observation:
+            raise ConfigError(f"method=sysid replays the real trajectories from their recorded initial states, and task "
+                              f"{task.name} cannot map an observation to a simulator state "
+                              "(Task.state_from_observation); use method=bayessim or method=simopt")
+        self.cfg, self.comp = cfg, comp
+        self.low, self.high = comp.prior.low.double(), comp.prior.high.double()
+
+    def stages(self) -> list[Stage]:
+        return [Stage("fit", self.fit, inputs=("real",))]
+
+    def proposal(self, ctx: RoundContext) -> ParameterDistribution:
+        """What the round starts from: the prior, then the previous round's distribution (sysid draws nothing from it)."""
+        return self.comp.prior if ctx.round == 1 else ctx.output("fit", ctx.round - 1)["posterior"]
+
+    def fit(self, ctx: RoundContext) -> dict:
+        real = real_trajectories(ctx)
+        spec = self.comp.task.spec
+        residual = ReplayResidual(self.comp.sims, real, spec.low, spec.high, self.cfg.observed)
+        if ctx.round == 1:
+            start = ((self.comp.prior.mean.double() - self.low) / (self.high - self.low)).numpy()
+        else:
+            start = ctx.output("fit", ctx.round - 1)["estimate_unit"]
+        result = fit(residual, spec.names, start, self.cfg)
+        gaussian = laplace_gaussian(result, self.comp.prior.mean, self.comp.prior.stddev, self.low, self.high,
+                                    self.cfg.min_noise_std)
+        try:
+            posterior = TruncatedMixture(GaussianMixture(torch.zeros(1), gaussian.mean[None], gaussian.cov[None]),
+                                         self.low, self.high, seed=ctx.seed)
+        except ValueError as exc:
+            raise PosteriorError(f"round {ctx.round}: sysid's Gaussian: {exc}") from exc
+        span = (self.high - self.low).numpy()
+        return {
+            "estimate_unit": result.estimate, "estimate": residual.theta(result.estimate),
+            "intervals": result.intervals * span, "objectives": result.objectives,
+            "noise_std": math.sqrt(result.noise_var), "noise_std_used": gaussian.noise_std,
+            "simulations": residual.simulations, "diverged": residual.diverged, "real_trajectories": real.num,
+            "posterior": posterior,
+        }
+
+    def posterior(self, ctx: RoundContext) -> ParameterDistribution:
+        return ctx.output("fit")["posterior"]
+
+    def record(self, ctx: RoundContext) -> dict:
+        out = ctx.output("fit")
+        names = self.comp.task.spec.names
+        half = [float(v) if np.isfinite(v) else None for v in out["intervals"]]  # None: not identifiable
+        return {
+            "sim_trajectories": int(out["simulations"]),
+            "diverged": int(out["diverged"]),
+            "proposal": "sysid",
+            "sysid": {
+                "estimate": dict(zip(names, map(float, out["estimate"]))),
+                f"interval_{round(100 * (1 - INTERVAL_ALPHA))}": dict(zip(names, half)),
+                "iterations": len(out["objectives"]) - 1,
+                "objective_start": out["objectives"][0], "objective_final": out["objectives"][-1],
+                "noise_std": out["noise_std"], "noise_std_used": out["noise_std_used"],
+            },
+        }
+
+
+@register("method", "sysid", SysidConfig)
+def sysid(cfg: SysidConfig, comp) -> Sysid:
+    return Sysid(cfg, comp)

@@ -45,7 +45,8 @@ def identify(cfg, task, prior, sims, real):
     residual = ReplayResidual(sims, real, task.spec.low, task.spec.high, sysid_cfg.observed)
     start = ((prior.mean - prior.low) / (prior.high - prior.low)).numpy()
     result = fit(residual, task.spec.names, start, sysid_cfg)
-    gaussian = laplace_gaussian(result, prior.mean, prior.stddev, prior.low, prior.high, sysid_cfg.min_noise_std)
+    gaussian = laplace_gaussian(result, prior.mean, prior.stddev, prior.low, prior.high, sysid_cfg.min_noise_std,
+                                sysid_cfg.identified_below)
     return result, gaussian
 
 
@@ -80,8 +81,9 @@ def test_a_parameter_no_observation_depends_on_keeps_the_prior_spread(compose):
     cfg, task, prior, sims, real = pendulum(compose, COLOUR, noise=0.05)
     result, gaussian = identify(cfg, task, prior, sims, real)
     c = task.spec.names.index("colour")
-    assert math.isinf(result.intervals[c])  # sysid: not identifiable from these data
-    assert math.isfinite(result.intervals[:c].max())
+    assert math.isinf(result.unit_noise_std[c])  # sysid: not identifiable from these data
+    assert math.isfinite(result.unit_noise_std[:c].max())
+    assert gaussian.identified.tolist() == [True, True, False]
     assert float(gaussian.cov[c, c].sqrt()) == pytest.approx(float(prior.stddev[c]), rel=1e-6)
     assert float(gaussian.mean[c]) == pytest.approx(float(prior.mean[c]), abs=1e-9)
     torch.testing.assert_close(gaussian.cov[c, :c], torch.zeros(c, dtype=torch.float64), atol=1e-12, rtol=0)

@@ -15,6 +15,7 @@ import math
 from types import ModuleType
 
 import numpy as np
+import scipy.special
 
 from ...errors import ConfigError, PosteriorError
 from .residual import ReplayResidual
@@ -31,6 +32,7 @@ class SysidConfig:
     max_iters: int  # Gauss-Newton iterations per round
     fd_step: float  # finite-difference step as a fraction of each parameter's prior range
     min_noise_std: float  # floor on the residuals' noise standard deviation, in units of each observation's spread
+    identified_below: float  # identified: the data alone give a standard deviation below this fraction of the prior's
     observed: list[str] | None  # observation names fitted (partial observations); None: all
 
     def validate(self) -> None:
@@ -40,6 +42,8 @@ class SysidConfig:
             raise ConfigError(f"fd_step is a fraction of the prior range in (0, 0.1), got {self.fd_step}")
         if not (self.min_noise_std >= 0 and math.isfinite(self.min_noise_std)):
             raise ConfigError(f"need a finite min_noise_std >= 0, got {self.min_noise_std}")
+        if not self.identified_below > 0:
+            raise ConfigError(f"need identified_below > 0, got {self.identified_below}")
 
 
 def require_sysid() -> ModuleType:
@@ -59,7 +63,9 @@ class SysidFit:
     estimate: np.ndarray  # u* [D]
     jacobian: np.ndarray  # dr/du at u* [R, D]
     residual: np.ndarray  # r(u*) [R]
-    intervals: np.ndarray  # sysid's 95 % half-widths in unit coordinates [D]; inf: not identifiable from the data
+    # sysid's standard deviations per unit of noise standard deviation, sqrt(diag (J^T J)^-1) [D], in unit coordinates;
+    # inf where the data cannot identify the parameter (sysid's eigenvalue test)
+    unit_noise_std: np.ndarray
     objectives: list[float]  # 0.5 |r|^2 per iteration
 
     @property
@@ -91,5 +97,22 @@ def fit(residual: ReplayResidual, names: list[str], start: np.ndarray, cfg: Sysi
     jac = np.asarray(result.jac, np.float64)
     if not (np.isfinite(r).all() and np.isfinite(jac).all()):
         raise PosteriorError("sysid: replays near the estimate diverge; its Jacobian is not finite")
-    _, intervals = sysid.calculate_intervals([r], jac, alpha=INTERVAL_ALPHA)
-    return SysidFit(u, jac, r, np.asarray(intervals, np.float64), [float(v) for v in result.extras["objective"]])
+    return SysidFit(u, jac, r, unit_noise_std(sysid, jac), [float(v) for v in result.extras["objective"]])
+
+
+def unit_noise_std(sysid: ModuleType, jac: np.ndarray) -> np.ndarray:
+    """sysid's confidence intervals as standard deviations at noise variance 1: calculate_intervals estimates the
+    noise variance from the residuals it is given as |r|^2 / (R - D), so residuals of that norm make it 1 (the
+    covariance is then scaled by the noise variance actually used, which may be floored)."""
+    rows, dim = jac.shape
+    if rows <= dim:
+        raise PosteriorError(f"sysid: {rows} residuals cannot determine {dim} parameters; record longer or more "
+                             "real trajectories")
+    unit = np.full(rows, math.sqrt((rows - dim) / rows))
+    _, half_widths = sysid.calculate_intervals([unit], jac, alpha=INTERVAL_ALPHA)
+    return np.asarray(half_widths, np.float64) / interval_quantile(rows, dim)
+
+
+def interval_quantile(rows: int, dim: int) -> float:
+    """Student's t quantile sysid's intervals are half-widths of (rows - dim degrees of freedom)."""
+    return float(scipy.special.stdtrit(rows - dim, 1 - INTERVAL_ALPHA / 2))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
 from ...distributions.base import ParameterDistribution
@@ -22,7 +21,7 @@ from ...registry import register
 from ...stages import RoundContext, Stage
 from ...tasks.base import Task
 from ..base import InferenceMethod, real_trajectories
-from .fit import INTERVAL_ALPHA, SysidConfig, fit, require_sysid
+from .fit import INTERVAL_ALPHA, SysidConfig, fit, interval_quantile, require_sysid
 from .laplace import laplace_gaussian
 from .residual import ReplayResidual
 
@@ -55,16 +54,16 @@ class Sysid(InferenceMethod):
             start = ctx.output("fit", ctx.round - 1)["estimate_unit"]
         result = fit(residual, spec.names, start, self.cfg)
         gaussian = laplace_gaussian(result, self.comp.prior.mean, self.comp.prior.stddev, self.low, self.high,
-                                    self.cfg.min_noise_std)
+                                    self.cfg.min_noise_std, self.cfg.identified_below)
         try:
             posterior = TruncatedMixture(GaussianMixture(torch.zeros(1), gaussian.mean[None], gaussian.cov[None]),
                                          self.low, self.high, seed=ctx.seed)
         except ValueError as exc:
             raise PosteriorError(f"round {ctx.round}: sysid's Gaussian: {exc}") from exc
-        span = (self.high - self.low).numpy()
         return {
             "estimate_unit": result.estimate, "estimate": residual.theta(result.estimate),
-            "intervals": result.intervals * span, "objectives": result.objectives,
+            "data_std": gaussian.data_std, "identified": gaussian.identified,
+            "interval_quantile": interval_quantile(*result.jacobian.shape), "objectives": result.objectives,
             "noise_std": math.sqrt(result.noise_var), "noise_std_used": gaussian.noise_std,
             "simulations": residual.simulations, "diverged": residual.diverged, "real_trajectories": real.num,
             "posterior": posterior,
@@ -76,7 +75,8 @@ class Sysid(InferenceMethod):
     def record(self, ctx: RoundContext) -> dict:
         out = ctx.output("fit")
         names = self.comp.task.spec.names
-        half = [float(v) if np.isfinite(v) else None for v in out["intervals"]]  # None: not identifiable
+        # sysid's confidence intervals at the noise used; None: not identifiable from the data
+        half = [float(v) if math.isfinite(v) else None for v in (out["interval_quantile"] * out["data_std"]).tolist()]
         return {
             "sim_trajectories": int(out["simulations"]),
             "diverged": int(out["diverged"]),
@@ -84,6 +84,7 @@ class Sysid(InferenceMethod):
             "sysid": {
                 "estimate": dict(zip(names, map(float, out["estimate"]))),
                 f"interval_{round(100 * (1 - INTERVAL_ALPHA))}": dict(zip(names, half)),
+                "identified": dict(zip(names, map(bool, out["identified"].tolist()))),
                 "iterations": len(out["objectives"]) - 1,
                 "objective_start": out["objectives"][0], "objective_final": out["objectives"][-1],
                 "noise_std": out["noise_std"], "noise_std_used": out["noise_std_used"],

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from bayessim_exp import registry
-from bayessim_exp.errors import ConfigError
+from bayessim_exp.errors import ConfigError, DataError
 from bayessim_exp.inference.sysid.fit import fit
 from bayessim_exp.inference.sysid.laplace import laplace_gaussian
 from bayessim_exp.inference.sysid.residual import ReplayResidual
@@ -99,6 +99,15 @@ def test_partial_observations_fit_the_named_ones_only(compose):
     assert residual.size == real.num * real.horizon
     with pytest.raises(ConfigError, match="did you mean theta_dot"):
         ReplayResidual(sims, real, task.spec.low, task.spec.high, ["theta_dott"])
+
+
+def test_fewer_observed_values_than_parameters_are_refused_before_simulating(compose):
+    cfg, task, prior, sims, real = pendulum(compose, trajectories=1, horizon=2)
+    residual = ReplayResidual(sims, real, task.spec.low, task.spec.high, ["theta_dot"])
+    _, sysid_cfg = registry.parse_params("method", cfg.method)
+    with pytest.raises(DataError, match="2 observed values cannot determine 2 parameters"):
+        fit(residual, task.spec.names, np.full(2, 0.5), sysid_cfg)
+    assert residual.simulations == 0
 
 
 def test_a_task_that_cannot_restart_from_an_observation_is_refused(compose, tmp_path):

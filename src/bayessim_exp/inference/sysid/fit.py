@@ -17,7 +17,7 @@ from types import ModuleType
 import numpy as np
 import scipy.special
 
-from ...errors import ConfigError, PosteriorError
+from ...errors import ConfigError, DataError, PosteriorError
 from .residual import ReplayResidual
 
 log = logging.getLogger(__name__)
@@ -71,12 +71,15 @@ class SysidFit:
     @property
     def noise_var(self) -> float:
         """sysid's estimate of the residuals' noise variance: |r|^2 / (R - D), as in calculate_intervals."""
-        return float(self.residual @ self.residual) / max(1, self.residual.size - self.estimate.size)
+        return float(self.residual @ self.residual) / (self.residual.size - self.estimate.size)
 
 
 def fit(residual: ReplayResidual, names: list[str], start: np.ndarray, cfg: SysidConfig) -> SysidFit:
     """Least squares of `residual` over u in [0, 1]^D from `start` [D]."""
     sysid = require_sysid()
+    if residual.size <= len(names):
+        raise DataError(f"sysid: {residual.size} observed values cannot determine {len(names)} parameters; record "
+                        "longer or more real trajectories")
     params = sysid.ParameterDict()
     for name, u0 in zip(names, start):
         params.add(sysid.Parameter(name, float(u0), 0.0, 1.0))
@@ -105,9 +108,6 @@ def unit_noise_std(sysid: ModuleType, jac: np.ndarray) -> np.ndarray:
     noise variance from the residuals it is given as |r|^2 / (R - D), so residuals of that norm make it 1 (the
     covariance is then scaled by the noise variance actually used, which may be floored)."""
     rows, dim = jac.shape
-    if rows <= dim:
-        raise PosteriorError(f"sysid: {rows} residuals cannot determine {dim} parameters; record longer or more "
-                             "real trajectories")
     unit = np.full(rows, math.sqrt((rows - dim) / rows))
     _, half_widths = sysid.calculate_intervals([unit], jac, alpha=INTERVAL_ALPHA)
     return np.asarray(half_widths, np.float64) / interval_quantile(rows, dim)

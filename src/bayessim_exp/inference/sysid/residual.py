@@ -5,7 +5,8 @@ The parameters enter in unit coordinates of the prior's box, u = (theta - low) /
 finite-difference step and one optimiser tolerance suit parameters in any units. Each observation dimension is
 divided by its standard deviation over the real data, so dimensions in different units count alike and the
 residuals' noise is in units of each observation's spread. Steps after a real episode ended (`valid` False) carry
-no information and are left out. mujoco.minimize evaluates many points at once (its finite-difference Jacobian
+no information and are left out; a replay that ends earlier than its real trajectory holds its last observation
+(Simulator.rollout), a mismatch the residual counts. mujoco.minimize evaluates many points at once (its finite-difference Jacobian
 asks for D + 1 columns): they are simulated in one batch.
 """
 

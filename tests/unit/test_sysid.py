@@ -93,6 +93,21 @@ def test_a_parameter_no_observation_depends_on_keeps_the_prior_spread(compose):
     assert ((gaussian.mean - truth) / std)[:c].abs().max() < 4
 
 
+def test_parameters_that_only_trade_off_against_each_other_keep_the_prior_spread(compose):
+    # a second mass scaling the same body: the data fix only the product of the two
+    trade = ['+task.parameters.mass2={range: [0.5, 2.0], operation: scaling, targets: ["body_mass[pole]", '
+             '"body_inertia[pole]"]}', "+task.real_params.mass2=1.0"]
+    cfg, task, prior, sims, real = pendulum(compose, trade)
+    result, gaussian = identify(cfg, task, prior, sims, real)
+    estimate = torch.as_tensor(result.estimate) * (prior.high - prior.low) + prior.low
+    assert float(estimate[0] * estimate[2]) == pytest.approx(1.0, abs=1e-4)  # the product, exactly
+    assert gaussian.identified.tolist() == [False, True, False]
+    torch.testing.assert_close(gaussian.cov.diagonal().sqrt()[[0, 2]], prior.stddev[[0, 2]].double())
+    assert float(gaussian.cov[0, 2]) == 0.0
+    z = (gaussian.mean - torch.as_tensor(task.real_values)) / gaussian.cov.diagonal().sqrt()
+    assert z.abs().max() < 3
+
+
 def test_partial_observations_fit_the_named_ones_only(compose):
     cfg, task, prior, sims, real = pendulum(compose, noise=0.05)
     residual = ReplayResidual(sims, real, task.spec.low, task.spec.high, ["theta_dot"])

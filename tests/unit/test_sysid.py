@@ -13,6 +13,7 @@ from bayessim_exp.errors import ConfigError, DataError
 from bayessim_exp.inference.sysid.fit import fit
 from bayessim_exp.inference.sysid.laplace import laplace_gaussian
 from bayessim_exp.inference.sysid.residual import ReplayResidual
+from bayessim_exp.inference.sysid.starts import best_fit, start_points
 from bayessim_exp.pipeline import Pipeline
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.sim.pool import SimulatorPool
@@ -75,6 +76,21 @@ def test_noise_free_observations_give_the_truth_and_the_floored_noise(compose):
     assert gaussian.noise_std == cfg.method.min_noise_std
     # the floor, not float32 rounding, sets the spread: still far below the prior's
     assert (gaussian.cov.diagonal().sqrt() < 0.01 * prior.stddev).all()
+
+
+def test_a_fit_stuck_in_a_local_minimum_from_the_prior_mean_is_left_for_a_screened_start(compose):
+    # this truth and excitation: Gauss-Newton from the prior's mean stops with residuals as large as the signal
+    cfg, task, prior, sims, _ = pendulum(compose, ["task.real_params.mass=0.598", "task.real_params.length=0.390"])
+    real = sims.get(1).rollout(task.real_values[None], RandomPolicy(1, 3), 50, 5)
+    _, sysid_cfg = registry.parse_params("method", cfg.method)
+    residual = ReplayResidual(sims, real, task.spec.low, task.spec.high, None)
+    mean = ((prior.mean - prior.low) / (prior.high - prior.low)).numpy()
+    stuck = fit(residual, task.spec.names, mean, sysid_cfg)
+    assert stuck.noise_var ** 0.5 > 0.5
+    starts = start_points(residual, mean, prior, sysid_cfg, torch.Generator().manual_seed(0))
+    assert len(starts) == sysid_cfg.starts and (starts[0] == mean).all()
+    found = best_fit(residual, task.spec.names, starts, sysid_cfg)
+    np.testing.assert_allclose(residual.theta(found.estimate), task.real_values, atol=1e-6)
 
 
 def test_a_parameter_no_observation_depends_on_keeps_the_prior_spread(compose):

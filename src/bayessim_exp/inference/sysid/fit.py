@@ -29,7 +29,9 @@ INTERVAL_ALPHA = 0.05  # sysid's default: the recorded intervals are 95 % ones
 class SysidConfig:
     """method=sysid; defaults in conf/method/sysid.yaml."""
 
-    max_iters: int  # Gauss-Newton iterations per round
+    max_iters: int  # iterations of each Gauss-Newton run
+    starts: int  # Gauss-Newton runs per round: from the previous estimate, and from the best screened prior draws
+    screen: int  # prior draws whose residuals pick the other starts
     fd_step: float  # finite-difference step as a fraction of each parameter's prior range
     min_noise_std: float  # floor on the residuals' noise standard deviation, in units of each observation's spread
     identified_below: float  # identified: the data alone give a standard deviation below this fraction of the prior's
@@ -38,6 +40,8 @@ class SysidConfig:
     def validate(self) -> None:
         if self.max_iters < 1:
             raise ConfigError(f"need max_iters >= 1, got {self.max_iters}")
+        if self.starts < 1 or (self.starts > 1 and self.screen < self.starts - 1):
+            raise ConfigError(f"need starts >= 1 and screen >= starts - 1, got starts={self.starts}, screen={self.screen}")
         if not 0 < self.fd_step < 0.1:
             raise ConfigError(f"fd_step is a fraction of the prior range in (0, 0.1), got {self.fd_step}")
         if not (self.min_noise_std >= 0 and math.isfinite(self.min_noise_std)):

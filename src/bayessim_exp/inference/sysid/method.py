@@ -3,9 +3,10 @@
 The round fits the task's parameters (the ParamSpec BayesSim infers: same names, box and operations, written by
 sim/params.py) by least squares of every real trajectory recorded so far against its replay in simulation, from its
 recorded initial state (Task.state_from_observation) under its recorded actions, with mujoco.sysid's optimiser
-(fit.py). It hands out a Gaussian around the estimate (laplace.py) restricted to the prior's box: scored, plotted
+(fit.py, from several starts: starts.py). It hands out a Gaussian around the estimate (laplace.py) restricted to the prior's box: scored, plotted
 and used for domain randomization like a posterior. Round 1 starts at the prior's mean, later rounds at the previous
-round's estimate; each round fits all real data again, so the rounds do not multiply their information.
+round's estimate, each also from the best of a screen of prior draws; each round fits all real data again, so the
+rounds do not multiply their information.
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ from ...registry import register
 from ...stages import RoundContext, Stage
 from ...tasks.base import Task
 from ..base import InferenceMethod, real_trajectories
-from .fit import INTERVAL_ALPHA, SysidConfig, fit, interval_quantile, require_sysid
+from .fit import INTERVAL_ALPHA, SysidConfig, interval_quantile, require_sysid
 from .laplace import laplace_gaussian
 from .residual import ReplayResidual
+from .starts import best_fit, start_points
 
 
 class Sysid(InferenceMethod):
@@ -52,7 +54,8 @@ class Sysid(InferenceMethod):
             start = ((self.comp.prior.mean.double() - self.low) / (self.high - self.low)).numpy()
         else:
             start = ctx.output("fit", ctx.round - 1)["estimate_unit"]
-        result = fit(residual, spec.names, start, self.cfg)
+        starts = start_points(residual, start, self.comp.prior, self.cfg, torch.Generator().manual_seed(ctx.seed))
+        result = best_fit(residual, spec.names, starts, self.cfg)
         gaussian = laplace_gaussian(result, self.comp.prior.mean, self.comp.prior.stddev, self.low, self.high,
                                     self.cfg.min_noise_std, self.cfg.identified_below)
         try:

@@ -6,8 +6,8 @@ finite-difference step and one optimiser tolerance suit parameters in any units.
 divided by its standard deviation over the real data, so dimensions in different units count alike and the
 residuals' noise is in units of each observation's spread. Steps after a real episode ended (`valid` False) carry
 no information and are left out; a replay that ends earlier than its real trajectory holds its last observation
-(Simulator.rollout), a mismatch the residual counts. mujoco.minimize evaluates many points at once (its finite-difference Jacobian
-asks for D + 1 columns): they are simulated in one batch.
+(Simulator.rollout), a mismatch the residual counts. mujoco.minimize evaluates many points at once (its
+finite-difference Jacobian asks for D columns): they are simulated in one batch.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ class ReplayResidual:
         self.simulations += len(params)
         self.diverged += int(sim.diverged.sum())
         k = len(columns)
-        states = sim.states.double().cpu()[:, 1:][..., self.index].reshape(k, m, *self.mask.shape[1:], -1)
+        states = sim.states.double().cpu()[:, 1:][..., self.index].reshape(k, m, self.mask.shape[1], -1)
         diff = (states[:, self.mask] - self.target) / self.scale  # [k, valid steps, S']
         broken = sim.diverged.cpu().reshape(k, m)[:, :, None].expand(k, m, self.mask.shape[1])[:, self.mask]
         diff = torch.where(broken[..., None], torch.nan, diff)

@@ -6,6 +6,7 @@ import json
 import pytest
 
 from bayessim_exp import api
+from bayessim_exp.inference.sysid.fit import SysidFit
 from bayessim_exp.inference.sysid.method import Sysid
 from bayessim_exp.pipeline import Pipeline
 
@@ -41,6 +42,16 @@ def test_pendulum_smoke_finds_the_true_parameters(compose, tmp_path):
         assert abs(last["sysid"]["estimate"][name] - true[name]) < 1e-5
         assert abs(last["posterior_mean"][name] - true[name]) < 3 * last["posterior_std"][name]
     assert last["log_prob_gain"] > 5.0
+
+
+def test_a_fit_that_leaves_residuals_as_large_as_the_observations_hands_on_the_prior(compose, tmp_path, monkeypatch):
+    # what a local minimum every start fell into looks like: a noise estimate of the observations' own spread
+    monkeypatch.setattr(SysidFit, "noise_var", property(lambda self: 1.0))
+    results = Pipeline(compose(SMOKE), tmp_path).run()
+    for rnd in results["rounds"]:
+        assert rnd["sysid"]["failed"] and rnd["sysid"]["noise_std"] == 1.0
+        assert rnd["posterior_std"] == rnd["prior_std"]
+        assert rnd["log_prob_gain"] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_a_killed_run_resumes_without_repeating_the_fit(compose, tmp_path, monkeypatch):

@@ -35,6 +35,7 @@ class SysidConfig:
     fd_step: float  # finite-difference step as a fraction of each parameter's prior range
     min_noise_std: float  # floor on the residuals' noise standard deviation, in units of each observation's spread
     identified_below: float  # identified: the data alone give a standard deviation below this fraction of the prior's
+    max_noise_std: float  # a fit whose noise estimate exceeds this (units of each observation's spread) failed
     observed: list[str] | None  # observation names fitted (partial observations); None: all
 
     def validate(self) -> None:
@@ -44,10 +45,12 @@ class SysidConfig:
             raise ConfigError(f"need starts >= 1 and screen >= starts - 1, got starts={self.starts}, screen={self.screen}")
         if not 0 < self.fd_step < 0.1:
             raise ConfigError(f"fd_step is a fraction of the prior range in (0, 0.1), got {self.fd_step}")
-        if not (self.min_noise_std >= 0 and math.isfinite(self.min_noise_std)):
-            raise ConfigError(f"need a finite min_noise_std >= 0, got {self.min_noise_std}")
+        if not (self.min_noise_std > 0 and math.isfinite(self.min_noise_std)):  # 0: float32 rounding as the noise
+            raise ConfigError(f"need a finite min_noise_std > 0, got {self.min_noise_std}")
         if not self.identified_below > 0:
             raise ConfigError(f"need identified_below > 0, got {self.identified_below}")
+        if not self.max_noise_std > 0:
+            raise ConfigError(f"need max_noise_std > 0, got {self.max_noise_std}")
 
 
 def require_sysid() -> ModuleType:

@@ -30,6 +30,7 @@ import math
 
 import torch
 
+from ...errors import PosteriorError
 from .fit import SysidFit
 
 
@@ -50,7 +51,11 @@ def laplace_gaussian(result: SysidFit, prior_mean: torch.Tensor, prior_std: torc
     information = jac.T @ jac / noise_var
     prior_var = (prior_std.double() / span) ** 2  # V0 in unit coordinates
     precision = information + torch.diag(1.0 / prior_var)
-    cov = torch.cholesky_inverse(torch.linalg.cholesky(0.5 * (precision + precision.T)))
+    factor, info = torch.linalg.cholesky_ex(0.5 * (precision + precision.T))
+    if info != 0:
+        raise PosteriorError(f"sysid's precision is too ill-conditioned to invert at noise {math.sqrt(noise_var):.3g}; "
+                             "raise method.min_noise_std")
+    cov = torch.cholesky_inverse(factor)
     m0 = (prior_mean.double() - low) / span
     mean = cov @ (information @ torch.as_tensor(result.estimate, dtype=torch.float64) + m0 / prior_var)
     data_std = torch.as_tensor(result.unit_noise_std, dtype=torch.float64) * math.sqrt(noise_var)

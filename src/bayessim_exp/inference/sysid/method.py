@@ -3,14 +3,16 @@
 The round fits the task's parameters (the ParamSpec BayesSim infers: same names, box and operations, written by
 sim/params.py) by least squares of every real trajectory recorded so far against its replay in simulation, from its
 recorded initial state (Task.state_from_observation) under its recorded actions, with mujoco.sysid's optimiser
-(fit.py, from several starts: starts.py). It hands out a Gaussian around the estimate (laplace.py) restricted to the prior's box: scored, plotted
-and used for domain randomization like a posterior. Round 1 starts at the prior's mean, later rounds at the previous
-round's estimate, each also from the best of a screen of prior draws; each round fits all real data again, so the
-rounds do not multiply their information.
+(fit.py) from several starts (starts.py). It hands out a Gaussian around the estimate (laplace.py) restricted to the
+prior's box: scored, plotted and used for domain randomization like a posterior; where even the best fit leaves
+residuals about as large as the observations' spread (method.max_noise_std), the round hands on the prior instead.
+Round 1 starts at the prior's mean, later rounds at the previous round's estimate, each also from the best of a
+screen of prior draws; each round fits all real data again, so the rounds do not multiply their information.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 
 import torch
@@ -26,6 +28,8 @@ from .fit import INTERVAL_ALPHA, SysidConfig, interval_quantile, require_sysid
 from .laplace import laplace_gaussian
 from .residual import ReplayResidual
 from .starts import best_fit, start_points
+
+log = logging.getLogger(__name__)
 
 
 class Sysid(InferenceMethod):
@@ -58,16 +62,25 @@ class Sysid(InferenceMethod):
         result = best_fit(residual, spec.names, starts, self.cfg)
         gaussian = laplace_gaussian(result, self.comp.prior.mean, self.comp.prior.stddev, self.low, self.high,
                                     self.cfg.min_noise_std, self.cfg.identified_below)
-        try:
-            posterior = TruncatedMixture(GaussianMixture(torch.zeros(1), gaussian.mean[None], gaussian.cov[None]),
-                                         self.low, self.high, seed=ctx.seed)
-        except ValueError as exc:
-            raise PosteriorError(f"round {ctx.round}: sysid's Gaussian: {exc}") from exc
+        # residuals about as large as the observations' spread: no start reached parameters that explain the data
+        # (or the model cannot), and a Gaussian around this estimate would be confidently wrong
+        failed = math.sqrt(result.noise_var) > self.cfg.max_noise_std
+        if failed:
+            log.warning("round %d: sysid's best fit leaves residuals of %.3g of the observations' spread (method."
+                        "max_noise_std=%g); the round hands on the prior", ctx.round, math.sqrt(result.noise_var),
+                        self.cfg.max_noise_std)
+            posterior = self.comp.prior
+        else:
+            try:
+                posterior = TruncatedMixture(GaussianMixture(torch.zeros(1), gaussian.mean[None], gaussian.cov[None]),
+                                             self.low, self.high, seed=ctx.seed)
+            except ValueError as exc:
+                raise PosteriorError(f"round {ctx.round}: sysid's Gaussian: {exc}") from exc
         return {
             "estimate_unit": result.estimate, "estimate": residual.theta(result.estimate),
             "data_std": gaussian.data_std, "identified": gaussian.identified,
             "interval_quantile": interval_quantile(*result.jacobian.shape), "objectives": result.objectives,
-            "noise_std": math.sqrt(result.noise_var), "noise_std_used": gaussian.noise_std,
+            "noise_std": math.sqrt(result.noise_var), "noise_std_used": gaussian.noise_std, "failed": failed,
             "simulations": residual.simulations, "diverged": residual.diverged, "real_trajectories": real.num,
             "posterior": posterior,
         }
@@ -91,6 +104,7 @@ class Sysid(InferenceMethod):
                 "iterations": len(out["objectives"]) - 1,
                 "objective_start": out["objectives"][0], "objective_final": out["objectives"][-1],
                 "noise_std": out["noise_std"], "noise_std_used": out["noise_std_used"],
+                "failed": bool(out["failed"]),  # the round handed on the prior (method.max_noise_std)
             },
         }
 

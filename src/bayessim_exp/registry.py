@@ -54,6 +54,7 @@ _BUILTIN_MODULES = (
     "bayessim_exp.recorded.csv_table",
     "bayessim_exp.inference.bayessim.method",
     "bayessim_exp.inference.simopt.method",
+    "bayessim_exp.inference.sysid.method",
     "bayessim_exp.sim.native",
     "bayessim_exp.sim.mjx",
     "bayessim_exp.sim.auto",

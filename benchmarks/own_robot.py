@@ -38,8 +38,9 @@ JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_ro
 
 
 def excitation(rng: np.random.Generator, episodes: int, steps: int, dt: float) -> np.ndarray:
-    """Normalised servo targets [episodes, steps, 6]: per joint three sines of 0.2 to 1.5 Hz, random phases, summing
-    to at most 0.6 of the joint's range around its middle: smooth, slow and broad, as a person teleoperating moves."""
+    """Normalised servo targets [episodes, steps, 6]: per joint three sines of 0.2 to 1.5 Hz, random phases, amplitudes
+    summing to 0.6 (so at most 60 % of the ctrlrange, around its middle): smooth, slow and broad, as a person
+    teleoperating moves the arm."""
     t = np.arange(steps) * dt
     freq = rng.uniform(0.2, 1.5, (episodes, 1, len(JOINTS), 3))
     phase = rng.uniform(0, 2 * np.pi, (episodes, 1, len(JOINTS), 3))

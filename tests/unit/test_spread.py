@@ -1,7 +1,7 @@
 """The common spread factor that calibrates a mixture's joint HPD regions (models/spread.py), against
 mixtures whose calibrated factor is known: parameters drawn from a mixture, and that mixture given back
-with every standard deviation divided by a known factor (then the calibrated factor is that one), or as it is
-(then 1), and the validation split that keeps each pair's role when fine-tuning appends rows."""
+with every standard deviation divided or multiplied by a known factor (then the calibrated factor undoes it), or
+as it is (then 1), and the validation split that keeps each pair's role when fine-tuning appends rows."""
 
 import math
 
@@ -49,10 +49,15 @@ def test_the_factor_undoes_a_known_narrowing(components, correlated, narrowed_by
         assert record["inside_unscaled"]["0.5"] < 0.3, record
 
 
-def test_an_underconfident_mixture_keeps_its_spread():
-    """The factor only widens: a mixture twice as wide as calibrated gets 1."""
+@pytest.mark.parametrize("widened_by", [1.3, 1.9])
+def test_an_underconfident_mixture_is_narrowed_until_its_regions_hold_their_share(widened_by):
+    """A mixture wider than calibrated at every level gets the factor that undoes it: narrowed in 1 % steps while
+    both regions still hold their share, so it stops within a few steps above 1 / widened_by, and the shares it
+    records hold their levels."""
     log_w, means, U, theta = _mixtures(3, True, seed=3)
-    assert joint_factor(log_w, means, U / 2, theta, diagonal=False, seed=0)[0] == 1.0
+    found, record = joint_factor(log_w, means, U / widened_by, theta, diagonal=False, seed=0)
+    assert 1.01**-1 <= found * widened_by <= 1.01**3, found
+    assert record["inside_unscaled"]["0.5"] > 0.8 and record["inside"]["0.5"] >= 0.5 and record["inside"]["0.9"] >= 0.9
 
 
 def test_diagonal_factors_give_the_same_factor_by_either_path():

@@ -11,11 +11,13 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
+import math
 import statistics
 import sys
 from pathlib import Path
 from string import Template
 
+import numpy as np
 from omegaconf import OmegaConf
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,6 +25,8 @@ TEMPLATES = ROOT / "benchmarks" / "results_templates"
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "scripts"))
 import methods  # noqa: E402  benchmarks/methods.py
+from bayessim_exp.report.calibration import LEVELS, Calibration, calibration, clopper_pearson  # noqa: E402
+from bayessim_exp.report.jobs import read_jobs  # noqa: E402
 
 # every job runs on the CPU on one thread, so that 14 jobs share 16 cores without a GPU in the way
 CPU_JOB = ["sim=native", "sim.nthread=1", "device=cpu", "logging.progress=false"]
@@ -68,12 +72,14 @@ def spread(values: list[float], fmt: str) -> str:
 
 
 class MethodsSection:
-    """SimOpt against BayesSim: the jobs of sweeps/methods.yaml, one process each, and SimOpt in closed loop."""
+    """BayesSim, SimOpt and MuJoCo's sysid: the jobs of sweeps/methods.yaml at each task's own truth, one process
+    each, SimOpt in closed loop, and a known-truth study (sweeps/calibration.yaml) of every method on every task."""
 
     name = "methods"
     sweep = ROOT / "sweeps" / "methods.yaml"
-    costs = {("Cartpole", "bayessim"): 240, ("Cartpole", "simopt"): 150, ("Pendulum", "bayessim"): 120,
-             ("Pendulum", "simopt"): 60}
+    truths = 10  # known truths per task and method (2 when quick): the same truths for every method (seeds 0..)
+    costs = {("Cartpole", "bayessim"): 240, ("Cartpole", "simopt"): 150, ("Cartpole", "sysid"): 60,
+             ("Pendulum", "bayessim"): 120, ("Pendulum", "simopt"): 60, ("Pendulum", "sysid"): 30}
 
     def grid(self, quick: bool) -> list[dict]:
         params = OmegaConf.to_container(OmegaConf.load(self.sweep).hydra.sweeper.params)
@@ -82,38 +88,100 @@ class MethodsSection:
             values = {"task": ["Pendulum"], "method": values["method"], "seed": [0]}
         return [dict(zip(values, combo)) for combo in itertools.product(*values.values())]
 
+    def pairs(self, quick: bool) -> list[tuple[str, str]]:
+        return sorted({(p["task"], p["method"]) for p in self.grid(quick)})
+
     def jobs(self, ctx: Context) -> list[Job]:
-        budget = ["debug=smoke"] if ctx.quick else []
         out = []
         for point in self.grid(ctx.quick):
             label = f"{point['task']}_{point['method']}_seed{point['seed']}"
-            argv = [sys.executable, "-m", "bayessim_exp", *[f"{k}={v}" for k, v in point.items()], *CPU_JOB, *budget,
-                    f"hydra.run.dir={ctx.work / 'sweep' / label}"]
+            argv = [sys.executable, "-m", "bayessim_exp", *[f"{k}={v}" for k, v in point.items()], *CPU_JOB,
+                    *self._budget(ctx), f"hydra.run.dir={ctx.work / 'sweep' / label}"]
             out.append(Job(f"methods/{label}", argv, self.costs.get((point["task"], point["method"]), 120)))
+        for task, method in self.pairs(ctx.quick):
+            for seed in range(2 if ctx.quick else self.truths):
+                argv = [sys.executable, "-m", "bayessim_exp", "--config-dir", "sweeps", "--config-name", "calibration",
+                        f"task={task}", f"method={method}", f"seed={seed}", *CPU_JOB, *self._budget(ctx),
+                        f"hydra.run.dir={ctx.work / 'calibration' / f'{task}_{method}' / f'seed{seed}'}"]
+                out.append(Job(f"methods/calibration_{task}_{method}_seed{seed}", argv, self.costs.get((task, method), 120)))
+        return out + [self._closed_loop_job(ctx)]
+
+    @staticmethod
+    def _budget(ctx: Context) -> list[str]:
+        return ["debug=smoke"] if ctx.quick else []
+
+    def _closed_loop_job(self, ctx: Context) -> Job:
         argv = [sys.executable, "-m", "bayessim_exp", "task=Pendulum", "method=simopt", "method.rollout=closed_loop",
-                "seed=0", *CPU_JOB, *budget, f"hydra.run.dir={ctx.work / 'closed_loop'}"]
-        return out + [Job("methods/closed_loop", argv, 60)]
+                "seed=0", *CPU_JOB, *self._budget(ctx), f"hydra.run.dir={ctx.work / 'closed_loop'}"]
+        return Job("methods/closed_loop", argv, 60)
 
     def render(self, ctx: Context, stamp: str) -> str:
         runs = methods.finished_runs([ctx.work / "sweep"])
-        expected = {(p["task"], p["method"]) for p in self.grid(ctx.quick)}
+        expected = set(self.pairs(ctx.quick))
         if set(runs) != expected or len({len(v) for v in runs.values()}) != 1:
             raise SectionError(f"finished runs {sorted((k, len(v)) for k, v in runs.items())}, expected {sorted(expected)}")
         closed = methods.finished_runs([ctx.work / "closed_loop"])
         if not closed:
             raise SectionError("the closed-loop run did not finish")
-        jobs = self.jobs(ctx)
-        budget = " debug=smoke" if ctx.quick else ""
+        budget = " ".join(["", *self._budget(ctx)])
         commands = (f"python -m bayessim_exp task=T method=M seed=S {' '.join(CPU_JOB)}{budget}   # each (T, M, S) "
-                    f"of sweeps/methods.yaml\n{python_command(jobs[-1].argv)}")
+                    f"of sweeps/methods.yaml\n{python_command(self._closed_loop_job(ctx).argv)}")
+        studies = self._studies(ctx)
+        truths = len(next(iter(studies.values()))[1])
+        study_command = (f"python -m bayessim_exp --config-dir sweeps --config-name calibration task=T method=M seed=S "
+                         f"{' '.join(CPU_JOB)}{budget}   # S = 0..{truths - 1}, each (T, M) above")
         reading = [self._task_bullet(task, runs) for task in sorted({t for t, _ in runs})]
         reading.append(self._closed_loop_bullet(runs, next(iter(closed.values()))[0]))
         sweep_dir = ctx.work / "sweep"
         return template(self.name).substitute(
-            stamp=stamp, settings=self._settings(runs), commands=commands, jobs=len(jobs) - 1, table=methods.table(runs),
-            sweep_dir=sweep_dir.relative_to(ROOT) if sweep_dir.is_relative_to(ROOT) else sweep_dir,
+            stamp=stamp, settings=self._settings(runs), commands=commands, jobs=len(self.grid(ctx.quick)),
+            table=methods.table(runs), sweep_dir=sweep_dir.relative_to(ROOT) if sweep_dir.is_relative_to(ROOT) else sweep_dir,
             seeds=", ".join(str(r["seed"]) for _, r in next(iter(runs.values()))), parallel=ctx.jobs,
-            reading="\n".join(reading))
+            reading="\n".join(reading), truths=truths, study_command=study_command,
+            study_table=self._study_table(studies), study_reading="\n".join(self._study_bullets(studies)))
+
+    def _studies(self, ctx: Context) -> dict[tuple[str, str], tuple[Calibration, list[float]]]:
+        """(task, method) -> the calibration of its known-truth runs and each run's mean error / range."""
+        studies = {}
+        for task, method in self.pairs(ctx.quick):
+            jobs = read_jobs(ctx.work / "calibration" / f"{task}_{method}")
+            finished = [j for j in jobs if j.status == "finished"]
+            found = calibration(finished)
+            if found is None or found.jobs != len(jobs) or not jobs:
+                raise SectionError(f"{task} {method}: {len(finished)} of {len(jobs)} known-truth runs finished with a truth")
+            studies[(task, method)] = (found, [methods.last_round(j.results, j.path)["mean error / range"]
+                                               for j in finished])
+        return studies
+
+    @staticmethod
+    def _study_table(studies: dict) -> str:
+        lines = ["| task | method | truths | inside the 50 % region | inside the 90 % region | gain at the truth "
+                 "(quartiles, nats) | gain > 0 | mean error / range (median, quartiles) | guard failed / mismatch "
+                 "flagged (final round) |", "|---|---|---:|---|---|---|---:|---|---|"]
+        for (task, method), (c, errors) in sorted(studies.items()):
+            shares = []
+            for level in LEVELS:
+                k, n = c.inside[level][-1]
+                shares.append(f"{_share(k, n)}{_verdict(k, n, level)}")
+            gains = [g if g is not None else -math.inf for g in c.gains]
+            q1, q2, q3 = (float(v) for v in np.quantile(gains, (0.25, 0.5, 0.75)))
+            e1, e2, e3 = (float(v) for v in np.quantile(errors, (0.25, 0.5, 0.75)))
+            lines.append(f"| {task} | {method} | {c.jobs} | {shares[0]} | {shares[1]} | {q1:+.2f} / {q2:+.2f} / "
+                         f"{q3:+.2f} | {sum(g > 0 for g in gains)} | {e2:.3g} ({e1:.3g}–{e3:.3g}) | "
+                         f"{c.guard_failed_final} / {c.flagged_final} |")
+        return "\n".join(lines)
+
+    @staticmethod
+    def _study_bullets(studies: dict) -> list[str]:
+        bullets = []
+        for task in sorted({t for t, _ in studies}):
+            found = {m: studies[(t, m)] for t, m in studies if t == task}
+            held = ", ".join(f"{m} {c.inside[0.9][-1][0]} of {c.inside[0.9][-1][1]}{_verdict(*c.inside[0.9][-1], 0.9)}"
+                             for m, (c, _) in sorted(found.items()))
+            closest = min(found, key=lambda m: statistics.median(found[m][1]))
+            bullets.append(f"- **{task}**: truths inside the final 90 % region: {held}. Closest to the truths "
+                           f"(median mean error / range): {closest}, {statistics.median(found[closest][1]):.3g}.")
+        return bullets
 
     @staticmethod
     def _settings(runs: dict) -> str:
@@ -121,7 +189,8 @@ class MethodsSection:
         any_cfg = next(iter(cfgs.values()))
         bayessim = {t: c for (t, m), c in sorted(cfgs.items()) if m == "bayessim"}
         simopt = next((c for (_, m), c in cfgs.items() if m == "simopt"), None)
-        text = (f"Default settings of both methods: {any_cfg.rounds} rounds, {any_cfg.real.per_round} new surrogate-real "
+        sysid = next((c for (_, m), c in cfgs.items() if m == "sysid"), None)
+        text = (f"Default settings of every method: {any_cfg.rounds} rounds, {any_cfg.real.per_round} new surrogate-real "
                 f"roll-out(s) per round ({any_cfg.collect.horizon} steps, `{any_cfg.policy.name}` collect policy), "
                 f"{any_cfg.collect.trajectories:,} parameter draws per round.")
         if bayessim:
@@ -133,36 +202,43 @@ class MethodsSection:
             text += (f" SimOpt: {simopt.method.updates} REPS updates of "
                      f"{simopt.collect.trajectories // simopt.method.updates:,} draws per round, each draw rolled out "
                      f"from every real roll-out's start (`method.rollout={simopt.method.rollout}`).")
+        if sysid is not None:
+            text += (f" sysid (MuJoCo's `mujoco.sysid`): per round {sysid.method.starts} Gauss-Newton runs of up to "
+                     f"{sysid.method.max_iters} iterations replaying the real actions from the real starts, the best "
+                     f"kept, and a Gaussian of its confidence intervals (noise floor `method.min_noise_std` = "
+                     f"{sysid.method.min_noise_std} of each observation's spread).")
         return text
 
     @staticmethod
     def _task_bullet(task: str, runs: dict) -> str:
-        b, s = runs[(task, "bayessim")], runs[(task, "simopt")]
-        error = {name: [methods.last_round(r, d)["mean error / range"] for d, r in found]
-                 for name, found in (("BayesSim", b), ("SimOpt", s))}
-        gain = {name: [r["rounds"][-1]["log_prob_gain"] for _, r in found] for name, found in (("BayesSim", b), ("SimOpt", s))}
-        eb, es = statistics.fmean(error["BayesSim"]), statistics.fmean(error["SimOpt"])
-        closer, ratio = ("SimOpt", eb / es) if es < eb else ("BayesSim", es / eb)
-        names = b[0][1]["param_names"]
-        text = (f"- **{task}** ({len(names)} parameters, means over {len(b)} seeds): mean error / range "
-                f"{eb:.2g} (BayesSim) and {es:.2g} (SimOpt), {closer}'s {ratio:.1f}x closer; gain over the prior "
-                f"{statistics.fmean(gain['BayesSim']):+.2f} and {statistics.fmean(gain['SimOpt']):+.2f} nats.")
-        min_std = OmegaConf.load(s[0][0] / "config.yaml").method.min_std
-        floored = sum(all(_last(r, "posterior_std")[n] <= 1.02 * min_std * _width(r, n) for n in names) for _, r in s)
-        if floored:
-            text += (f" SimOpt's spread sits at its floor (`method.min_std` = {min_std} of each range) in {floored} of "
-                     f"{len(s)} seeds: its log density at the truth there is the floor's, not a measured uncertainty.")
-        worst = max(names, key=lambda n: statistics.fmean(abs(_last(r, "posterior_mean")[n] - r["true_params"][n])
-                                                           / _width(r, n) for _, r in s))
-        true = s[0][1]["true_params"][worst]
+        found = {m: f for (t, m), f in sorted(runs.items()) if t == task}
+        error = {m: statistics.fmean(methods.last_round(r, d)["mean error / range"] for d, r in f)
+                 for m, f in found.items()}
+        gain = {m: statistics.fmean(r["rounds"][-1]["log_prob_gain"] for _, r in f) for m, f in found.items()}
+        names = next(iter(found.values()))[0][1]["param_names"]
+        closest = min(error, key=error.get)
+        text = (f"- **{task}** ({len(names)} parameters, means over {len(next(iter(found.values())))} seeds): mean "
+                f"error / range " + ", ".join(f"{error[m]:.2g} ({m})" for m in found) + f", {closest} closest; gain "
+                f"over the prior " + ", ".join(f"{gain[m]:+.2f} ({m})" for m in found) + " nats.")
+        s = found.get("simopt")
+        if s:
+            min_std = OmegaConf.load(s[0][0] / "config.yaml").method.min_std
+            floored = sum(all(_last(r, "posterior_std")[n] <= 1.02 * min_std * _width(r, n) for n in names) for _, r in s)
+            if floored:
+                text += (f" SimOpt's spread sits at its floor (`method.min_std` = {min_std} of each range) in {floored} "
+                         f"of {len(s)} seeds: its log density at the truth there is the floor's, not a measured "
+                         f"uncertainty.")
+        worst = max(names, key=lambda n: max(statistics.fmean(abs(_last(r, "posterior_mean")[n] - r["true_params"][n])
+                                                               / _width(r, n) for _, r in f) for f in found.values()))
+        true = next(iter(found.values()))[0][1]["true_params"][worst]
         described = []
-        for name, found in (("SimOpt", s), ("BayesSim", b)):
-            means = [_last(r, "posterior_mean")[worst] for _, r in found]
-            stds = [_last(r, "posterior_std")[worst] for _, r in found]
+        for method, f in found.items():
+            means = [_last(r, "posterior_mean")[worst] for _, r in f]
+            stds = [_last(r, "posterior_std")[worst] for _, r in f]
             sigmas = [abs(m - true) / sd for m, sd in zip(means, stds)]
-            described.append(f"{name} {spread(means, '.3g')} ± {spread(stds, '.2g')}, the truth "
+            described.append(f"{method} {spread(means, '.3g')} ± {spread(stds, '.2g')}, the truth "
                              f"{spread(sigmas, '.1f')} of its standard deviations away")
-        return text + f" The parameter SimOpt misses most is `{worst}` (true {true:.3g}): " + "; ".join(described) + "."
+        return text + f" The parameter missed most is `{worst}` (true {true:.3g}): " + "; ".join(described) + "."
 
     @staticmethod
     def _closed_loop_bullet(runs: dict, closed: tuple[Path, dict]) -> str:
@@ -295,3 +371,14 @@ def _width(results: dict, name: str) -> float:
 
 def _number(value: float | None) -> str:
     return "-" if value is None else f"{value:.0f}"
+
+
+def _share(k: int, n: int) -> str:
+    low, high = clopper_pearson(k, n)
+    return f"{k}/{n} = {k / n:.2f} [{low:.2f}, {high:.2f}]"
+
+
+def _verdict(k: int, n: int, level: float) -> str:
+    """Where the share's 95 % interval leaves out the level: the regions are too narrow or too wide."""
+    low, high = clopper_pearson(k, n)
+    return " (too narrow)" if high < level else " (too wide)" if low > level else ""

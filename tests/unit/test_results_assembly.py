@@ -14,7 +14,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import results  # noqa: E402  benchmarks/results.py
-from results_sections import Context, MethodsSection, RlSection, ScriptSection  # noqa: E402
+from results_sections import Context, MethodsSection, RlSection, ScriptSection, SectionError  # noqa: E402
 
 
 def test_the_committed_page_is_what_the_assembler_writes_from_it():
@@ -30,36 +30,70 @@ def test_a_regenerated_section_replaces_its_block_only_and_a_missing_one_is_name
     assert "new text" in again and "ppo text" in again and "Not generated yet" not in again.split("end methods")[0]
 
 
-def _fake_run(path: Path, task: str, method: str, seed: int, names: list[str], mean: float, std: float) -> None:
+def _fake_run(path: Path, task: str, method: str, seed: int, names: list[str], mean: float, std: float,
+              hpd_level: float | None = None) -> None:
     path.mkdir(parents=True)
     cfg = {"rounds": 2, "real": {"per_round": 1}, "collect": {"horizon": 20, "trajectories": 300},
            "policy": {"name": "random"}, "model": {"name": "mdnn"}, "summarizer": {"name": "start"},
            "method": {"name": method, "updates": 5, "min_std": 0.005, "rollout": "recorded", "proposal": "truncated",
-                      "parameter_space": "auto"}}
+                      "parameter_space": "auto", "starts": 3, "max_iters": 50, "min_noise_std": 0.01}}
     (path / "config.yaml").write_text(yaml.safe_dump(cfg))
     last = {"posterior_mean": {n: mean for n in names}, "posterior_std": {n: std for n in names},
             "log_prob_true_posterior": 1.5, "log_prob_gain": 1.0, "real_trajectories": 2, "sim_trajectories": 300}
+    if hpd_level is not None:  # a known-truth run: where its truth lies in its final posterior
+        last = {**last, "truth": {"hpd_level": hpd_level, "marginal_rank": {n: 0.5 for n in names}}}
     (path / "results.json").write_text(json.dumps({
         "task": task, "method": method, "seed": seed, "param_names": names, "true_params": {n: 1.0 for n in names},
         "prior": {"low": {n: 0.5 for n in names}, "high": {n: 2.0 for n in names}}, "rounds": [last, last]}))
 
 
+# each method's truths at planted HPD levels: BayesSim's spread evenly (calibrated), SimOpt's all outside its
+# regions (overconfident), sysid's all at its mode (too wide)
+PLANTED = {"bayessim": [0.05 + 0.1 * i for i in range(10)], "simopt": [0.99] * 10, "sysid": [0.01] * 10}
+
+
 def test_the_methods_section_quotes_what_its_runs_measured(tmp_path):
     ctx = Context(work=tmp_path, figures=tmp_path / "figures", quick=False, jobs=14)
     section = MethodsSection()
+    offset = {"bayessim": 0.1, "simopt": 0.001, "sysid": 0.0001}
     for point in section.grid(quick=False):
-        simopt = point["method"] == "simopt"
-        names = ["mass", "length"] if point["task"] == "Pendulum" else ["cart_mass", "pole_mass", "motor_gain"]
-        _fake_run(tmp_path / "sweep" / f"{point['task']}_{point['method']}_{point['seed']}", point["task"],
-                  point["method"], point["seed"], names, 1.0 + (0.001 if simopt else 0.1 + 0.01 * point["seed"]),
-                  0.0075 if simopt else 0.05)
+        task, method = point["task"], point["method"]
+        names = ["mass", "length"] if task == "Pendulum" else ["cart_mass", "pole_mass", "motor_gain"]
+        mean = 1.0 + offset[method] + (0.01 * point["seed"] if method == "bayessim" else 0)
+        _fake_run(tmp_path / "sweep" / f"{task}_{method}_{point['seed']}", task, method, point["seed"], names, mean,
+                  0.0075 if method == "simopt" else 0.05)
+    for task, method in section.pairs(quick=False):
+        names = ["mass", "length"] if task == "Pendulum" else ["cart_mass", "pole_mass", "motor_gain"]
+        for seed, level in enumerate(PLANTED[method]):
+            _fake_run(tmp_path / "calibration" / f"{task}_{method}" / f"seed{seed}", task, method, seed, names,
+                      1.0 + offset[method], 0.05, hpd_level=level)
     _fake_run(tmp_path / "closed_loop", "Pendulum", "simopt", 0, ["mass", "length"], 1.6, 0.2)
     text = section.render(ctx, "STAMP")
-    assert text.startswith("## SimOpt and BayesSim") and "STAMP" in text and "$" not in text
-    assert "| Pendulum | simopt | 3 |" in text and "| Cartpole | bayessim | 3 |" in text
-    assert "mean error / range 0.073 (BayesSim) and 0.00067 (SimOpt), SimOpt's 110.0x closer" in text
+    assert text.startswith("## BayesSim, SimOpt and MuJoCo's sysid") and "STAMP" in text and "$" not in text
+    assert "| Pendulum | simopt | 3 |" in text and "| Cartpole | bayessim | 3 |" in text and "| Cartpole | sysid | 3 |" in text
+    assert ("mean error / range 0.073 (bayessim), 0.00067 (simopt), 6.7e-05 (sysid), sysid closest") in text
     assert "at its floor (`method.min_std` = 0.005 of each range) in 3 of 3 seeds" in text
     assert "mean error 0.4 of the range against 0.00067 with `recorded`" in text
+    # the known-truth study: shares with their exact intervals, marked where the interval leaves out the level
+    assert "| Pendulum | bayessim | 10 | 5/10 = 0.50 [0.19, 0.81] | 9/10 = 0.90 [0.55, 1.00] |" in text
+    assert "| Cartpole | simopt | 10 | 0/10 = 0.00 [0.00, 0.31] (too narrow) | 0/10 = 0.00 [0.00, 0.31] (too narrow) |" in text
+    assert "| Cartpole | sysid | 10 | 10/10 = 1.00 [0.69, 1.00] (too wide) | 10/10 = 1.00 [0.69, 1.00] |" in text
+    assert "truths inside the final 90 % region: bayessim 9 of 10, simopt 0 of 10 (too narrow), sysid 10 of 10." in text
+    assert "S = 0..9, each (T, M) above" in text
+
+
+def test_the_methods_section_refuses_a_study_with_a_run_missing(tmp_path):
+    ctx = Context(work=tmp_path, figures=tmp_path / "figures", quick=True, jobs=2)
+    section = MethodsSection()
+    for point in section.grid(quick=True):
+        _fake_run(tmp_path / "sweep" / f"{point['method']}", "Pendulum", point["method"], 0, ["mass"], 1.0, 0.05)
+    _fake_run(tmp_path / "closed_loop", "Pendulum", "simopt", 0, ["mass"], 1.6, 0.2)
+    for task, method in section.pairs(quick=True):
+        _fake_run(tmp_path / "calibration" / f"{task}_{method}" / "seed0", task, method, 0, ["mass"], 1.0, 0.05, 0.3)
+    (tmp_path / "calibration" / "Pendulum_sysid" / "seed1").mkdir()
+    (tmp_path / "calibration" / "Pendulum_sysid" / "seed1" / "error.txt").write_text("killed")
+    with pytest.raises(SectionError, match="Pendulum sysid: 1 of 2 known-truth runs"):
+        section.render(ctx, "STAMP")
 
 
 def test_the_ppo_section_writes_its_figure_and_table(tmp_path):

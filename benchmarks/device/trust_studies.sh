@@ -11,8 +11,9 @@
 # 2. known-truth studies (sweeps/calibration.yaml) of the tasks in STUDIES, "TASK:FIRST:LAST:JOBS" each
 #    (seeds FIRST..LAST-1, JOBS runs of one simulation thread at once, fits on the last GPU); the first
 #    study runs at normal priority, the later ones under `nice` so that they take what the others leave.
-# Logs go to $OUT (gpu_benchmarks.sh's background folder); the studies' run directories to
-# /tmp/calibration_<task>, which `collect` tars with how many runs finished.
+# Logs go to $OUT (gpu_benchmarks.sh's background folder); each study's run directories to
+# /tmp/calibration_<task>_<first>, which `collect` tars with how many runs finished. A seed is a truth: a study
+# that repeats seeds an earlier one finished measures those truths twice (docs/benchmarks.md lists the seeds run).
 set -u
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-$PWD/device_out}
@@ -27,8 +28,8 @@ for study in ${STUDIES:-FrankaCabinet:0:50:12 ShadowHand:20:50:10}; do
     IFS=: read -r task first last jobs <<<"$study"
     CUDA_VISIBLE_DEVICES=$last_gpu nice -n "$niceness" python3 -m bayessim_exp --config-dir sweeps \
         --config-name calibration --multirun device=cuda "task=$task" "seed=range($first,$last)" sim=native \
-        sim.nthread=1 hydra/launcher=local "hydra.launcher.n_jobs=$jobs" "hydra.sweep.dir=/tmp/calibration_$task" \
-        >"$OUT/calibration_$task.log" 2>&1 &
+        sim.nthread=1 hydra/launcher=local "hydra.launcher.n_jobs=$jobs" "hydra.sweep.dir=/tmp/calibration_${task}_$first" \
+        >"$OUT/calibration_${task}_$first.log" 2>&1 &
     niceness=10
 done
 wait

@@ -77,7 +77,7 @@ class MethodsSection:
 
     name = "methods"
     sweep = ROOT / "sweeps" / "methods.yaml"
-    truths = 10  # known truths per task and method (2 when quick): the same truths for every method (seeds 0..)
+    truths = 20  # known truths per task and method (2 when quick): the same truths for every method (seeds 0..)
     costs = {("Cartpole", "bayessim"): 240, ("Cartpole", "simopt"): 150, ("Cartpole", "sysid"): 60,
              ("Pendulum", "bayessim"): 120, ("Pendulum", "simopt"): 60, ("Pendulum", "sysid"): 30}
 

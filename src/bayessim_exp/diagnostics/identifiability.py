@@ -37,18 +37,20 @@ TRADE_OFF = 0.5  # held-out prediction errors correlated beyond this: a pair the
 
 def held_out_predictions(x: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(predictions, targets) [M, D] on the held-out rows of u [N, D] from x [N, F]: per column, the ridge penalty
-    with the smallest held-out error (models/projection.RidgeSystem: intercept unpenalised). x's constant columns
-    are dropped; with none left, the prediction is the fitted rows' mean."""
-    x, u = x.double(), u.double()
-    held = torch.arange(len(x)) >= int((1 - HELD_OUT) * len(x))
+    with the smallest held-out error (models/projection.RidgeSystem: intercept unpenalised), computed on x's device
+    (thousands of summaries make the normal equations the cost: a GPU forms them in a fraction of a CPU's time).
+    x's constant columns are dropped; with none left, the prediction is the fitted rows' mean."""
+    x, u = x.double(), u.to(x.device).double()
+    held = torch.arange(len(x), device=x.device) >= int((1 - HELD_OUT) * len(x))
     varying = x[:, ~constant_columns(x[~held])]
     if varying.shape[1] == 0:
         return u[~held].mean(0).expand(int(held.sum()), -1), u[held]
     z = (varying - varying[~held].mean(0)) / varying[~held].std(0)
-    system = RidgeSystem(z, u)
-    predictions = torch.stack([system.predict(held, system.solve(p, held)) for p in RIDGE_PENALTIES])
+    fitted = RidgeSystem(z[~held], u[~held])  # the normal equations of the fitted rows alone
+    design = torch.cat([z[held], torch.ones(int(held.sum()), 1, dtype=z.dtype, device=z.device)], 1)
+    predictions = torch.stack([design @ fitted.solve(p) for p in RIDGE_PENALTIES])
     best = (predictions - u[held]).pow(2).mean(1).argmin(0)  # [D]: each parameter's penalty
-    return predictions[best, :, torch.arange(u.shape[1])].T, u[held]
+    return predictions[best, :, torch.arange(u.shape[1], device=x.device)].T, u[held]
 
 
 def linear_read(x: torch.Tensor, u: torch.Tensor, names: list[str], trade_off: float = TRADE_OFF) -> dict:
@@ -56,7 +58,8 @@ def linear_read(x: torch.Tensor, u: torch.Tensor, names: list[str], trade_off: f
     {"pairs": held-out rows, "r2": {name: R^2}, "trade_offs": [{"pair": [a, b], "correlation": c}] with
     |c| >= trade_off, strongest first}."""
     predicted, actual = held_out_predictions(x, u)
-    errors = actual - predicted
+    errors = (actual - predicted).cpu()
+    actual = actual.cpu()
     r2 = 1 - errors.pow(2).mean(0) / actual.var(0, correction=0).clamp_min(1e-300)
     correlation = torch.corrcoef(errors.T) if len(names) > 1 else torch.ones(1, 1, dtype=errors.dtype)
     pairs = [(float(correlation[i, j]), i, j) for i in range(len(names)) for j in range(i + 1, len(names))

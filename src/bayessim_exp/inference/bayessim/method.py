@@ -171,7 +171,7 @@ class BayesSim(InferenceMethod):
         parameters that move nothing are said before any fit."""
         theta, x, _, _ = self._split(ctx.output("summarize"))
         d, names = self.comp.rc.diagnostics, self.comp.task.spec.names
-        report = {**linear_read(x, self._fitted_space(theta), names), "local": None}
+        report = {**linear_read(x.to(self.comp.device), self._fitted_space(theta), names), "local": None}
         for entry in report["trade_offs"]:
             log.info("round %d: %s and %s are told apart only in part (held-out prediction errors correlate %+.2f)",
                      ctx.round, *entry["pair"], entry["correlation"])

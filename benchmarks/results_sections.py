@@ -25,7 +25,7 @@ TEMPLATES = ROOT / "benchmarks" / "results_templates"
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "scripts"))
 import methods  # noqa: E402  benchmarks/methods.py
-from bayessim_exp.report.calibration import LEVELS, Calibration, calibration, clopper_pearson  # noqa: E402
+from bayessim_exp.report.calibration import LEVELS, Calibration, calibration, clopper_pearson, share_text  # noqa: E402
 from bayessim_exp.report.jobs import read_jobs  # noqa: E402
 
 # every job runs on the CPU on one thread, so that 14 jobs share 16 cores without a GPU in the way
@@ -162,7 +162,7 @@ class MethodsSection:
             shares = []
             for level in LEVELS:
                 k, n = c.inside[level][-1]
-                shares.append(f"{_share(k, n)}{_verdict(k, n, level)}")
+                shares.append(f"{share_text(k, n)}{_verdict(k, n, level)}")
             gains = [g if g is not None else -math.inf for g in c.gains]
             q1, q2, q3 = (float(v) for v in np.quantile(gains, (0.25, 0.5, 0.75)))
             e1, e2, e3 = (float(v) for v in np.quantile(errors, (0.25, 0.5, 0.75)))
@@ -371,11 +371,6 @@ def _width(results: dict, name: str) -> float:
 
 def _number(value: float | None) -> str:
     return "-" if value is None else f"{value:.0f}"
-
-
-def _share(k: int, n: int) -> str:
-    low, high = clopper_pearson(k, n)
-    return f"{k}/{n} = {k / n:.2f} [{low:.2f}, {high:.2f}]"
 
 
 def _verdict(k: int, n: int, level: float) -> str:

@@ -90,7 +90,8 @@ def calibration(jobs: list[Job]) -> Calibration | None:
         outside_rounds=(sum(bool(e["flagged"]) for e in checked), len(checked)), ranks=ranks)
 
 
-def _share(k: int, n: int) -> str:
+def share_text(k: int, n: int) -> str:
+    """k / n with its Clopper-Pearson interval, as the report and docs/results.md write a share."""
     low, high = clopper_pearson(k, n)
     return f"{k}/{n} = {k / n:.2f} [{low:.2f}, {high:.2f}]"
 
@@ -103,12 +104,12 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
     lines = [f"### `{config}`", "",
              f"{c.jobs} truths" + (f" ({c.left_out} finished jobs without a known truth left out)" if c.left_out else "")
              + ". Share of truths inside the final posterior's highest-density regions (Clopper-Pearson "
-             f"{CONFIDENCE:.0%} interval): " + "; ".join(f"{level:.0%} region {_share(*final[level])}"
+             f"{CONFIDENCE:.0%} interval): " + "; ".join(f"{level:.0%} region {share_text(*final[level])}"
                                                            for level in LEVELS) + ".", "",
              "| round | " + " | ".join(f"inside {level:.0%} region" for level in LEVELS) + " |",
              "|---|" + "---|" * len(LEVELS)]
     for r in range(len(c.inside[LEVELS[0]])):
-        lines.append(f"| {r + 1} | " + " | ".join(_share(*c.inside[level][r]) for level in LEVELS) + " |")
+        lines.append(f"| {r + 1} | " + " | ".join(share_text(*c.inside[level][r]) for level in LEVELS) + " |")
     lines += ["",
               f"Log-density gain at the truth, final round: quartiles {quartiles[0]:+.2f} / {quartiles[1]:+.2f} / "
               f"{quartiles[2]:+.2f} nats; above zero for {sum(g > 0 for g in gains)} of {len(c.gains)}"
@@ -117,7 +118,7 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
               f"the final round handed on another distribution (fallback) in {c.handed_on_other}. "
               f"Mismatch flagged: final round {c.flagged_final} of {c.jobs}, any round {c.flagged_any}. "
               "Real data outside the training simulations (a guard failure): "
-              + (f"{_share(*c.outside_rounds)} of the rounds checked." if c.outside_rounds[1] else "not checked.")]
+              + (f"{share_text(*c.outside_rounds)} of the rounds checked." if c.outside_rounds[1] else "not checked.")]
     if figure is not None:
         lines += ["", f"![SBC ranks of `{config}`]({figure.name})"]
     return lines + [""]

@@ -4,8 +4,10 @@
     python benchmarks/results.py --quick --jobs 2     # tiny budgets into outputs/results_quick/ (never docs/)
     python benchmarks/results.py --sections methods   # only these sections; the others keep their current text
 
-Measured on the lent H100 machine's 16 cores (2026-11-23): the methods and PPO sections' 16 jobs, 15 at a time,
-in 144 s (the longest, a PPO seed, 144 s; docs/results.md stamps each); the foreign-dynamics section (59 whole
+Measured: the methods section's 139 jobs (18 at the tasks' truths, 120 known-truth runs, one closed loop), 2 at a
+time on the 2-core development machine, in 1,979 s (2026-11-25; 3,957 s of jobs, the longest 71 s); on the lent
+H100 machine's 16 cores (2026-11-23) the PPO section's 3 jobs with the methods section's 13 of then, 15 at a
+time, in 144 s (the longest, a PPO seed, 144 s; docs/results.md stamps each); the foreign-dynamics section (59 whole
 runs in its own pool) took 282 s with its fits on the GPU (`--device cuda`) and is estimated at two to three
 times that with CPU fits, its default here. Every methods and PPO job runs on one CPU thread (`sim=native
 device=cpu`), so that a dozen processes do not share the GPU. `--sections` runs sections in separate calls

@@ -20,8 +20,10 @@ OUT=${OUT:-$PWD/device_out}
 mkdir -p "$OUT"
 last_gpu=$(($(nvidia-smi -L | wc -l) - 1))
 
-CUDA_VISIBLE_DEVICES=0 python3 benchmarks/round_coverage.py --jobs "${ROUND_JOBS:-5}" --out /tmp/round_coverage \
-    --json "$OUT/round_coverage.json" -- device=cuda sim=native sim.nthread=3 >"$OUT/round_coverage.log" 2>&1 &
+if [ "${ROUND_JOBS:-5}" -gt 0 ]; then
+    CUDA_VISIBLE_DEVICES=0 python3 benchmarks/round_coverage.py --jobs "${ROUND_JOBS:-5}" --out /tmp/round_coverage \
+        --json "$OUT/round_coverage.json" -- device=cuda sim=native sim.nthread=3 >"$OUT/round_coverage.log" 2>&1 &
+fi
 
 niceness=0
 for study in ${STUDIES:-FrankaCabinet:0:50:12 ShadowHand:20:50:10}; do

@@ -7,7 +7,7 @@
 #   sleep 540; bash benchmarks/device/gpu_benchmarks.sh collect      # repeated, each call right after the last
 #
 # 1. every round's held-out coverage on all 11 tasks (benchmarks/round_coverage.py, seed 0, ROUND_JOBS runs
-#    of sim.nthread=3 at once, on the first GPU);
+#    of sim.nthread=3 at once, on the first GPU; ROUND_JOBS=0 leaves it out);
 # 2. known-truth studies (sweeps/calibration.yaml) of the tasks in STUDIES, "TASK:FIRST:LAST:JOBS" each
 #    (seeds FIRST..LAST-1, JOBS runs of one simulation thread at once, fits on the last GPU); the first
 #    study runs at normal priority, the later ones under `nice` so that they take what the others leave.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The trust issue's device studies side by side on one lent machine of 32 cores (nvidia-h100-x2), after
+# The trust issue's device studies side by side on one lent machine of 32 cores (nvidia-h100-x2) or more, after
 # gpu_benchmarks.sh's installation, in the background so that they outlast a call:
 #
 #   COMMIT=<sha> OMP_NUM_THREADS=1 bash benchmarks/device/gpu_benchmarks.sh background exec \
@@ -9,8 +9,10 @@
 # 1. every round's held-out coverage on all 11 tasks (benchmarks/round_coverage.py, seed 0, ROUND_JOBS runs
 #    of sim.nthread=3 at once, on the first GPU; ROUND_JOBS=0 leaves it out);
 # 2. known-truth studies (sweeps/calibration.yaml) of the tasks in STUDIES, "TASK:FIRST:LAST:JOBS" each
-#    (seeds FIRST..LAST-1, JOBS runs of one simulation thread at once, fits on the last GPU); the first
-#    study runs at normal priority, the later ones under `nice` so that they take what the others leave.
+#    (seeds FIRST..LAST-1, JOBS runs of one simulation thread at once); the first study fits on the last GPU,
+#    each later one on the GPU before (round robin), so that a study split into seed ranges spreads its fits
+#    over the GPUs; the first study runs at normal priority, the later ones under `nice` so that they take what
+#    the others leave.
 # Logs go to $OUT (gpu_benchmarks.sh's background folder); each study's run directories to
 # /tmp/calibration_<task>_<first>, which `collect` tars with how many runs finished. A seed is a truth: a study
 # that repeats seeds an earlier one finished measures those truths twice (docs/benchmarks.md lists the seeds run).
@@ -18,7 +20,7 @@ set -u
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-$PWD/device_out}
 mkdir -p "$OUT"
-last_gpu=$(($(nvidia-smi -L | wc -l) - 1))
+gpus=$(nvidia-smi -L | wc -l)
 
 if [ "${ROUND_JOBS:-5}" -gt 0 ]; then
     CUDA_VISIBLE_DEVICES=0 python3 benchmarks/round_coverage.py --jobs "${ROUND_JOBS:-5}" --out /tmp/round_coverage \
@@ -26,13 +28,15 @@ if [ "${ROUND_JOBS:-5}" -gt 0 ]; then
 fi
 
 niceness=0
+gpu=$((gpus - 1))
 for study in ${STUDIES:-FrankaCabinet:0:50:12 ShadowHand:20:50:10}; do
     IFS=: read -r task first last jobs <<<"$study"
-    CUDA_VISIBLE_DEVICES=$last_gpu nice -n "$niceness" python3 -m bayessim_exp --config-dir sweeps \
+    CUDA_VISIBLE_DEVICES=$gpu nice -n "$niceness" python3 -m bayessim_exp --config-dir sweeps \
         --config-name calibration --multirun device=cuda "task=$task" "seed=range($first,$last)" sim=native \
         sim.nthread=1 hydra/launcher=local "hydra.launcher.n_jobs=$jobs" "hydra.sweep.dir=/tmp/calibration_${task}_$first" \
         >"$OUT/calibration_${task}_$first.log" 2>&1 &
     niceness=10
+    gpu=$(((gpu + gpus - 1) % gpus))
 done
 wait
 echo "trust studies finished $(date -u +%H:%M:%S)"

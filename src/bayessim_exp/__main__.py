@@ -11,24 +11,23 @@ import math
 import sys
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig
 
 from . import job_failures
+from .errors import ConfigError, DataError, PosteriorError, TrainingError
 from .quick_exit import exit_without_finalization
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="config")
 def _app(cfg: DictConfig) -> float:
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
-
-    from .errors import ConfigError, DataError, PosteriorError, TrainingError
-    from .pipeline import run
+    from .pipeline import run  # imports torch (seconds): --help answers without it
 
     hydra_cfg = HydraConfig.get()
     out_dir = hydra_cfg.runtime.output_dir
     if hydra_cfg.mode == RunMode.RUN and "impl" in cfg.get("sim", {}):
-        from .sim.mjx import leave_out_warp
+        from .sim.mjx import leave_out_warp  # imports torch, as above
 
         leave_out_warp(cfg.sim.impl, cfg.task.get("mjx_tuning") or {})  # this process simulates this task only
     try:

@@ -3,8 +3,9 @@
 Every factory is called as `factory(cfg, action_dim=, seed=, control_dt=, actor=, recorded=, task=)`;
 `actor` is the RL component's latest trained actor (None before the first train_policy stage, or with
 rl=none), `recorded` the real trajectories recorded so far (None before the first real stage) and
-`task` the run's task. A policy of your own is a factory registered the same way (README: "Your own
-components").
+`task` the run's task. A policy of your own is such a factory, given to `registry.register` (README:
+"Your own components"). `rl` and `rl_randomized` act with torchrl, so their factories are in
+rl/actor_policy.py; their configs are here, where checking them loads no torchrl.
 
 A policy may also fix how each simulation starts: `plan(n) -> (OpenLoopPolicy, initial states or None)`
 (the replay policy); SimulatorPool.rollout asks for that plan before simulating.
@@ -13,15 +14,11 @@ A policy may also fix how each simulation starts: `plan(n) -> (OpenLoopPolicy, i
 from __future__ import annotations
 
 import dataclasses
-import logging
 
 import numpy as np
 import torch
 
 from .errors import ConfigError
-from .registry import register
-
-log = logging.getLogger(__name__)
 
 SIGNALS = ("constant", "sine", "chirp")
 
@@ -48,7 +45,6 @@ class RandomPolicyConfig:
     pass
 
 
-@register("policy", "random", RandomPolicyConfig)
 def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int, **_: object) -> RandomPolicy:
     return RandomPolicy(action_dim, seed)
 
@@ -120,7 +116,6 @@ class ReplayPolicy:
                           "(its plan fixes each simulation's start), not step by step")
 
 
-@register("policy", "replay", ReplayPolicyConfig)
 def replay_policy(cfg: ReplayPolicyConfig, seed: int, recorded=None, task=None, **_: object) -> ReplayPolicy:
     return ReplayPolicy(cfg, recorded, task, seed)
 
@@ -172,52 +167,13 @@ class FixedPolicy:
         return action.expand(obs.shape[0], -1)
 
 
-@register("policy", "fixed", FixedPolicyConfig)
 def fixed_policy(cfg: FixedPolicyConfig, action_dim: int, control_dt: float, **_: object) -> FixedPolicy:
     return FixedPolicy(cfg, action_dim, control_dt)
-
-
-class ActorPolicy:
-    """A trained torchrl actor's mean action; with probability `random_share` a slot's action is uniform instead."""
-
-    def __init__(self, actor, action_dim: int, seed: int, random_share: float):
-        self.actor, self.random_share = actor, random_share
-        self.random = RandomPolicy(action_dim, seed)
-        # where the actor's weights live; the simulator's observations may live elsewhere (None: a
-        # parameter-free actor, which acts where the observations are)
-        first = next(actor.parameters(), None) if isinstance(actor, torch.nn.Module) else None
-        self.device = None if first is None else first.device
-
-    @torch.no_grad()
-    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
-        from tensordict import TensorDict  # torchrl loads only where an actor is used
-        from torchrl.envs.utils import ExplorationType, set_exploration_type
-
-        device = self.device or obs.device
-        with set_exploration_type(ExplorationType.DETERMINISTIC):
-            td = self.actor(TensorDict({"observation": obs.float().to(device)}, batch_size=obs.shape[:1], device=device))
-        action = td["action"].clamp(-1.0, 1.0)
-        if self.random_share > 0:
-            explore = (torch.rand(obs.shape[0], generator=self.random.generator) < self.random_share).to(device)
-            action = torch.where(explore[:, None], self.random.act(obs, t).to(action), action)
-        return action
-
-
-def actor_policy(actor, action_dim: int, seed: int, random_share: float, name: str):
-    if actor is None:
-        log.info("policy=%s: no trained actor yet (first round, or rl=none): uniform random actions", name)
-        return RandomPolicy(action_dim, seed)
-    return ActorPolicy(actor, action_dim, seed, random_share)
 
 
 @dataclasses.dataclass
 class RLPolicyConfig:
     pass
-
-
-@register("policy", "rl", RLPolicyConfig)
-def rl_policy(cfg: RLPolicyConfig, action_dim: int, seed: int, actor=None, **_: object):
-    return actor_policy(actor, action_dim, seed, 0.0, "rl")
 
 
 @dataclasses.dataclass
@@ -227,8 +183,3 @@ class RandomizedRLPolicyConfig:
     def validate(self) -> None:
         if not 0.0 <= self.random_share <= 1.0:
             raise ConfigError(f"random_share must lie in [0, 1], got {self.random_share}")
-
-
-@register("policy", "rl_randomized", RandomizedRLPolicyConfig)
-def rl_randomized_policy(cfg: RandomizedRLPolicyConfig, action_dim: int, seed: int, actor=None, **_: object):
-    return actor_policy(actor, action_dim, seed, cfg.random_share, "rl_randomized")

@@ -10,7 +10,6 @@ import torch
 from .distributions.base import ParameterDistribution
 from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from .errors import ConfigError
-from .registry import register
 from .sim.params import ParamSpec
 
 
@@ -23,7 +22,6 @@ class UniformPriorConfig:
     pass
 
 
-@register("prior", "uniform", UniformPriorConfig)
 def uniform_prior(cfg: UniformPriorConfig, spec: ParamSpec) -> ParameterDistribution:
     return BoxUniform(*_box(spec))
 
@@ -33,7 +31,6 @@ class LogUniformPriorConfig:
     pass
 
 
-@register("prior", "loguniform", LogUniformPriorConfig)
 def loguniform_prior(cfg: LogUniformPriorConfig, spec: ParamSpec) -> ParameterDistribution:
     low, high = _box(spec)
     if (low <= 0).any():
@@ -52,7 +49,6 @@ class GaussianPriorConfig:
             raise ConfigError(f"stds_per_range must be a positive number, got {self.stds_per_range}")
 
 
-@register("prior", "gaussian", GaussianPriorConfig)
 def gaussian_prior(cfg: GaussianPriorConfig, spec: ParamSpec) -> ParameterDistribution:
     low, high = _box(spec)
     mean, std = 0.5 * (low + high), (high - low) / cfg.stds_per_range

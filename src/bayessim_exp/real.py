@@ -22,7 +22,6 @@ import torch
 
 from .errors import ConfigError, DataError
 from .policies import RandomPolicy, ReplayPolicy
-from .registry import register
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
 from .stages import stage_seed
@@ -194,11 +193,9 @@ def save_trajectories(path: str | Path, traj: Trajectories, params: np.ndarray |
     np.savez(path, **arrays)
 
 
-@register("real", "surrogate", SurrogateConfig)
 def surrogate(cfg: SurrogateConfig, task: Task, sims: SimulatorPool, prior, seed: int, **_: object) -> SurrogateReal:
     return SurrogateReal(cfg, task, sims, prior, seed)
 
 
-@register("real", "file", FileConfig)
 def from_file(cfg: FileConfig, task: Task, **_: object) -> FileReal:
     return FileReal(cfg, task)

@@ -1,13 +1,16 @@
 """Registry of components: (group, name) -> factory, with typed, checked parameters.
 
 Every option of a config group (task, prior, policy, summarizer, model, rl, sim, real) is a
-factory registered under its name together with a dataclass of its parameters. `build`
-checks a group's config against that dataclass (unknown keys and wrong types are errors that
-list what is allowed) before calling the factory.
+factory together with a dataclass of its parameters. `build` checks a group's config against that
+dataclass (unknown keys and wrong types are errors that list what is allowed) before calling the
+factory.
 
-Built-in components are imported here, not by the entry module, so that any process that
-builds a component (a submitit worker included) sees the full registry. Researchers add
-their own with `register` in a module named in the top-level `plugins` list.
+Built-in options are listed here by import path ("module:attribute") and imported on first use:
+listing the options imports nothing, checking a config imports only its dataclass's module, and
+building a component only its factory's module (a run without RL never loads torchrl). Because the
+list is here, not filled by side effects of imports, any process (a submitit worker included)
+sees every built-in option. Researchers add their own with `register` in a module named in the
+top-level `plugins` list.
 """
 
 from __future__ import annotations
@@ -25,42 +28,6 @@ from omegaconf.errors import OmegaConfBaseException
 from .errors import ConfigError
 
 CONF_DIR = Path(__file__).parent / "conf"  # the package's config (a link to conf/ in a source checkout)
-GROUPS = ("task", "prior", "method", "policy", "summarizer", "model", "rl", "sim", "real")
-
-_BUILTIN_MODULES = (
-    "bayessim_exp.tasks.pendulum",
-    "bayessim_exp.tasks.cartpole",
-    "bayessim_exp.tasks.ant",
-    "bayessim_exp.tasks.humanoid",
-    "bayessim_exp.tasks.ball_balance",
-    "bayessim_exp.tasks.ingenuity",
-    "bayessim_exp.tasks.quadcopter",
-    "bayessim_exp.tasks.shadow_hand",
-    "bayessim_exp.tasks.anymal",
-    "bayessim_exp.tasks.franka_cabinet",
-    "bayessim_exp.tasks.mjcf",
-    "bayessim_exp.priors",
-    "bayessim_exp.policies",
-    "bayessim_exp.summarizers.basic",
-    "bayessim_exp.summarizers.correlation",
-    "bayessim_exp.summarizers.signature",
-    "bayessim_exp.summarizers.learned",
-    "bayessim_exp.models.mdnn",
-    "bayessim_exp.models.mdrff",
-    "bayessim_exp.models.flow",
-    "bayessim_exp.models.linear",
-    "bayessim_exp.real",
-    "bayessim_exp.recorded.lerobot",
-    "bayessim_exp.recorded.csv_table",
-    "bayessim_exp.inference.bayessim.method",
-    "bayessim_exp.inference.simopt.method",
-    "bayessim_exp.inference.sysid.method",
-    "bayessim_exp.sim.native",
-    "bayessim_exp.sim.mjx",
-    "bayessim_exp.sim.auto",
-    "bayessim_exp.rl.none",
-    "bayessim_exp.rl.config",
-)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,8 +36,84 @@ class Entry:
     params: type
 
 
-_REGISTRY: dict[str, dict[str, Entry]] = {g: {} for g in GROUPS}
-_loaded_builtins = False
+@dataclasses.dataclass(frozen=True)
+class Builtin:
+    """A built-in option by import path, "bayessim_exp.<module>:<attribute>" without the package prefix;
+    `params` names the dataclass, which may live in a lighter module than the factory."""
+
+    factory: str
+    params: str
+
+
+def _same_module(module: str, factory: str, params: str) -> Builtin:
+    return Builtin(f"{module}:{factory}", f"{module}:{params}")
+
+
+# group -> option -> a built-in by import path, or the Entry that `register` gave (a plugin's; the modules of
+# tasks/, sim/, models/ and inference/bayessim/ still register themselves on import too, to the same effect)
+_REGISTRY: dict[str, dict[str, Entry | Builtin]] = {
+    "task": {
+        "Pendulum": _same_module("tasks.pendulum", "Pendulum", "PendulumConfig"),
+        "Cartpole": _same_module("tasks.cartpole", "Cartpole", "CartpoleConfig"),
+        "Ant": _same_module("tasks.ant", "Ant", "AntConfig"),
+        "Humanoid": _same_module("tasks.humanoid", "Humanoid", "HumanoidConfig"),
+        "BallBalance": _same_module("tasks.ball_balance", "BallBalance", "BallBalanceConfig"),
+        "Ingenuity": _same_module("tasks.ingenuity", "Ingenuity", "IngenuityConfig"),
+        "Quadcopter": _same_module("tasks.quadcopter", "Quadcopter", "QuadcopterConfig"),
+        "ShadowHand": _same_module("tasks.shadow_hand", "ShadowHand", "ShadowHandConfig"),
+        "ShadowHand_more": _same_module("tasks.shadow_hand", "ShadowHandMore", "ShadowHandConfig"),
+        "Anymal": _same_module("tasks.anymal", "Anymal", "AnymalConfig"),
+        "FrankaCabinet": _same_module("tasks.franka_cabinet", "FrankaCabinet", "FrankaCabinetConfig"),
+        "mjcf": _same_module("tasks.mjcf", "MjcfTask", "MjcfConfig"),
+    },
+    "prior": {
+        "uniform": _same_module("priors", "uniform_prior", "UniformPriorConfig"),
+        "loguniform": _same_module("priors", "loguniform_prior", "LogUniformPriorConfig"),
+        "gaussian": _same_module("priors", "gaussian_prior", "GaussianPriorConfig"),
+    },
+    "method": {
+        "bayessim": _same_module("inference.bayessim.method", "bayessim", "BayesSimConfig"),
+        "simopt": _same_module("inference.simopt.method", "simopt", "SimOptConfig"),
+        "sysid": _same_module("inference.sysid.method", "sysid", "SysidConfig"),
+    },
+    "policy": {
+        "random": _same_module("policies", "random_policy", "RandomPolicyConfig"),
+        "replay": _same_module("policies", "replay_policy", "ReplayPolicyConfig"),
+        "fixed": _same_module("policies", "fixed_policy", "FixedPolicyConfig"),
+        "rl": Builtin("rl.actor_policy:rl_policy", "policies:RLPolicyConfig"),
+        "rl_randomized": Builtin("rl.actor_policy:rl_randomized_policy", "policies:RandomizedRLPolicyConfig"),
+    },
+    "summarizer": {
+        "start": _same_module("summarizers.basic", "StartSummarizer", "StepsConfig"),
+        "waypoints": _same_module("summarizers.basic", "WaypointsSummarizer", "StepsConfig"),
+        "corr": _same_module("summarizers.correlation", "corr", "CorrelationConfig"),
+        "corrdiff": _same_module("summarizers.correlation", "corrdiff", "CorrelationConfig"),
+        "signatory": _same_module("summarizers.signature", "signatory", "SignatureConfig"),
+        "learned": _same_module("summarizers.learned", "learned", "LearnedConfig"),
+    },
+    "model": {
+        "mdnn": _same_module("models.mdnn", "mdnn", "MdnnConfig"),
+        "mdrff": _same_module("models.mdrff", "mdrff", "MdrffConfig"),
+        "flow": _same_module("models.flow", "flow", "FlowConfig"),
+        "linear": _same_module("models.linear", "linear", "LinearConfig"),
+    },
+    "rl": {
+        "none": _same_module("rl.none", "no_rl", "NoRLConfig"),
+        "ppo": Builtin("rl.component:ppo_component", "rl.config:PPOComponentConfig"),  # torchrl only when built
+    },
+    "sim": {
+        "native": _same_module("sim.native", "native_backend", "NativeConfig"),
+        "mjx": _same_module("sim.mjx", "mjx_backend", "MjxConfig"),
+        "auto": Builtin("sim.auto:auto_backend", "sim.mjx:MjxConfig"),
+    },
+    "real": {
+        "surrogate": _same_module("real", "surrogate", "SurrogateConfig"),
+        "file": _same_module("real", "from_file", "FileConfig"),
+        "csv": _same_module("recorded.csv_table", "from_csv", "CsvConfig"),
+        "lerobot": _same_module("recorded.lerobot", "from_lerobot", "LeRobotConfig"),
+    },
+}
+GROUPS = tuple(_REGISTRY)
 
 
 def register(group: str, name: str, params: type) -> Callable[[Callable], Callable]:
@@ -87,14 +130,6 @@ def register(group: str, name: str, params: type) -> Callable[[Callable], Callab
     return deco
 
 
-def load_builtins() -> None:
-    global _loaded_builtins
-    if not _loaded_builtins:
-        for module in _BUILTIN_MODULES:
-            importlib.import_module(module)
-        _loaded_builtins = True
-
-
 def load_plugins(modules: list[str] | tuple[str, ...]) -> None:
     """Import researcher modules that register their own components."""
     for module in modules:
@@ -105,12 +140,24 @@ def load_plugins(modules: list[str] | tuple[str, ...]) -> None:
 
 
 def names(group: str) -> list[str]:
-    load_builtins()
     return sorted(_REGISTRY[group])
 
 
 def entry(group: str, name: str) -> Entry:
-    load_builtins()
+    """The option's factory and parameter dataclass (imports its modules on first use)."""
+    option = _option(group, name)
+    if isinstance(option, Builtin):
+        option = Entry(_resolve(option.factory), _resolve(option.params))
+    return option
+
+
+def params_type(group: str, name: str) -> type:
+    """The option's parameter dataclass, imported without the factory's module."""
+    option = _option(group, name)
+    return _resolve(option.params) if isinstance(option, Builtin) else option.params
+
+
+def _option(group: str, name: str) -> Entry | Builtin:
     options = _REGISTRY.get(group)
     if options is None:
         raise ConfigError(f"unknown config group {group!r}; groups are {sorted(_REGISTRY)}")
@@ -123,13 +170,18 @@ def entry(group: str, name: str) -> Entry:
     return options[name]
 
 
+def _resolve(path: str) -> Any:
+    module, attribute = path.split(":")
+    return getattr(importlib.import_module(f"{__package__}.{module}"), attribute)
+
+
 def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
     """Check a group's config against its option's dataclass; return (name, params)."""
     container = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
     if "name" not in container:
         raise ConfigError(f"{group}: config has no 'name' key; allowed names: {', '.join(names(group))}")
     name = container.pop("name")
-    spec = entry(group, name).params
+    spec = params_type(group, name)
     # keys left out take the option's defaults from its YAML, the one place they are written
     container = {**{k: v for k, v in option_defaults(group, name).items() if k != "name"}, **container}
     allowed = [f.name for f in dataclasses.fields(spec)]

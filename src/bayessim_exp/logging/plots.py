@@ -172,7 +172,7 @@ def replay_plot(real: np.ndarray, posterior: np.ndarray, prior: np.ndarray, obs_
 def identifiability_plot(names: list[str], r2: list[float], rms: list[float] | None, title: str) -> plt.Figure:
     """Per parameter: the held-out R^2 of the summaries' linear read and, in round 1, the local sensitivity at the
     nominal parameters (red: below NO_EFFECT, the parameter moves nothing)."""
-    from ..diagnostics.identifiability import NO_EFFECT
+    from ..diagnostics.identifiability import NO_EFFECT  # imports torch: only where this figure is drawn
 
     views = 1 if rms is None else 2
     fig, axes = plt.subplots(1, views, figsize=(4.5 * views + 1.5, 0.22 * len(names) + 1.6), squeeze=False, sharey=True)

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..registry import register
 from ..tasks.base import Task
 from .log_real import FileDigest, LogReal, log_path, select
 from .mapping import Mapping
@@ -110,6 +109,5 @@ def read(cfg: CsvConfig, task: Task) -> LogReal:
     return LogReal(episodes, task, digest.hexdigest(), str(path))
 
 
-@register("real", "csv", CsvConfig)
 def from_csv(cfg: CsvConfig, task: Task, **_: object) -> LogReal:
     return read(cfg, task)

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..registry import register
 from ..tasks.base import Task
 from .log_real import FileDigest, LogReal, log_path, select
 from .mapping import Mapping, Schema, element_labels
@@ -157,6 +156,5 @@ def read(cfg: LeRobotConfig, task: Task) -> LogReal:
     return LogReal(episodes, task, digest.hexdigest(), str(root))
 
 
-@register("real", "lerobot", LeRobotConfig)
 def from_lerobot(cfg: LeRobotConfig, task: Task, **_: object) -> LogReal:
     return read(cfg, task)

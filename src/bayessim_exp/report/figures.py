@@ -73,6 +73,7 @@ def rounds_figure(jobs_by_config: dict[str, list[Job]], path: Path) -> Path:
 
 def posterior_figure(job: Job, label: str, path: Path, num_samples: int = 5000) -> Path:
     """The final round's posterior of one job, drawn as the run's TensorBoard pair plot."""
+    # torch and the run's components (seconds): only a report with posterior figures pays for them
     import torch
 
     from .. import api, registry

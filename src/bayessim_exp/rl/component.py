@@ -23,11 +23,14 @@ import logging
 import numpy as np
 import torch
 
+from ..errors import ConfigError
 from ..stages import RoundContext, Stage
+from .actor_policy import ActorPolicy
 from .config import PPOComponentConfig
 from .env import SimulatorEnv, distribution_sampler, fixed_params
 from .evaluate import episode_returns, summary
 from .ppo import PPOTrainer, make_agent
+from .video import render_gif
 
 log = logging.getLogger(__name__)
 
@@ -90,9 +93,6 @@ class PPOComponent:
         return agent.actor
 
     def evaluate(self, ctx: RoundContext) -> dict:
-        from ..policies import ActorPolicy
-        from .video import render_gif
-
         real_params = ctx.comp.real.true_params
         if real_params is None:
             log.warning("round %d: the real data source has no true parameters: no surrogate-real evaluation", ctx.round)
@@ -119,6 +119,14 @@ class PPOComponent:
                 "rl_training": {"train_on": self.cfg.train_on, "steps": curve["steps"][-1],
                                 "seconds": round(curve["seconds"][-1], 3),
                                 "last_episode_return": _last_finite(curve["episode_return"])}}
+
+
+def ppo_component(cfg: PPOComponentConfig, comp, **_: object):
+    """comp: the run's Components; the networks train on the run's `device`."""
+    if not comp.task.has_reward:
+        raise ConfigError(f"rl=ppo trains on the task's reward, and task={comp.task.name} defines none: give the "
+                          "task a reward (task=mjcf: its `reward` key), or run without RL (rl=none)")
+    return PPOComponent(cfg, comp)
 
 
 def _last_finite(values: list[float]) -> float | None:

@@ -1,7 +1,7 @@
-"""rl=ppo's typed config (defaults: conf/rl/ppo.yaml) and its registration.
+"""rl=ppo's typed config (defaults: conf/rl/ppo.yaml).
 
-Kept apart from the component so that building the registry does not import torchrl (seconds):
-torchrl loads only when a run really uses rl=ppo.
+Kept apart from the component so that checking a config does not import torchrl (seconds): torchrl
+loads only when a run really builds rl=ppo (registry: the factory is rl.component:ppo_component).
 """
 
 from __future__ import annotations
@@ -9,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 
 from ..errors import ConfigError
-from ..registry import register
 
 TRAIN_ON = ("posterior", "prior", "nominal")
 
@@ -65,14 +64,3 @@ class PPOComponentConfig:
         if self.evaluate.episodes < 1 or self.evaluate.video_steps < 0 or self.evaluate.video_size < 16:
             raise ConfigError("need evaluate.episodes >= 1, evaluate.video_steps >= 0, evaluate.video_size >= 16")
         self.train.validate()
-
-
-@register("rl", "ppo", PPOComponentConfig)
-def ppo_component(cfg: PPOComponentConfig, comp, **_: object):
-    """comp: the run's Components; the networks train on the run's `device`."""
-    if not comp.task.has_reward:
-        raise ConfigError(f"rl=ppo trains on the task's reward, and task={comp.task.name} defines none: give the "
-                          "task a reward (task=mjcf: its `reward` key), or run without RL (rl=none)")
-    from .component import PPOComponent
-
-    return PPOComponent(cfg, comp)

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..policies import ActorPolicy
 from ..sim.base import Simulator
+from .actor_policy import ActorPolicy
 
 
 def episode_returns(actor, sim: Simulator, params: np.ndarray, seed: int) -> torch.Tensor:

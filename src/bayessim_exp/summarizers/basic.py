@@ -7,7 +7,6 @@ import dataclasses
 import torch
 
 from ..errors import ConfigError
-from ..registry import register
 from ..sim.trajectories import Trajectories
 from .masking import held_states
 
@@ -53,13 +52,11 @@ class IndexSummarizer:
         return torch.cat(parts, 1)
 
 
-@register("summarizer", "start", StepsConfig)
 class StartSummarizer(IndexSummarizer):
     def indices(self, horizon: int) -> torch.Tensor:
         return torch.arange(self.cfg.steps)
 
 
-@register("summarizer", "waypoints", StepsConfig)
 class WaypointsSummarizer(IndexSummarizer):
     def indices(self, horizon: int) -> torch.Tensor:
         # actions at the last time clamp to T-1

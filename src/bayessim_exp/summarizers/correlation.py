@@ -18,7 +18,6 @@ import dataclasses
 import torch
 
 from ..errors import ConfigError
-from ..registry import register
 from ..sim.trajectories import Trajectories
 from .masking import held_states
 
@@ -87,11 +86,9 @@ class CorrelationSummarizer:
         return torch.cat([cross.flatten(1), s_mean, s_std, a_mean, a_std], 1)
 
 
-@register("summarizer", "corr", CorrelationConfig)
 def corr(cfg: CorrelationConfig) -> CorrelationSummarizer:
     return CorrelationSummarizer(cfg, state_differences=False)
 
 
-@register("summarizer", "corrdiff", CorrelationConfig)
 def corrdiff(cfg: CorrelationConfig) -> CorrelationSummarizer:
     return CorrelationSummarizer(cfg, state_differences=True)

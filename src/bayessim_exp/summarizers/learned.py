@@ -18,7 +18,6 @@ import torch
 from torch import nn
 
 from ..errors import ConfigError
-from ..registry import register
 from ..sim.trajectories import Trajectories
 from .basic import evenly_spaced_times
 from .masking import held_actions, held_states, valid_steps
@@ -101,6 +100,5 @@ class LearnedSummarizer:
         return per_time[:, idx].flatten(1)
 
 
-@register("summarizer", "learned", LearnedConfig)
 def learned(cfg: LearnedConfig) -> LearnedSummarizer:
     return LearnedSummarizer(cfg)

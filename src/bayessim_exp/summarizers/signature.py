@@ -17,7 +17,6 @@ import dataclasses
 import torch
 
 from ..errors import ConfigError
-from ..registry import register
 from ..sim.trajectories import Trajectories
 from . import tensor_algebra
 from .masking import held_actions, held_states, valid_steps
@@ -108,6 +107,5 @@ class SignatureSummarizer:
         return pysiglib_signature(path.contiguous(), cfg.depth, cfg.log_signature, cfg.threads)
 
 
-@register("summarizer", "signatory", SignatureConfig)
 def signatory(cfg: SignatureConfig) -> SignatureSummarizer:
     return SignatureSummarizer(cfg)

@@ -15,7 +15,6 @@ import torch
 from ...distributions.base import ParameterDistribution
 from ...distributions.mixture import GaussianMixture, TruncatedMixture
 from ...errors import ConfigError, PosteriorError
-from ...registry import register
 from ...stages import RoundContext, Stage
 from ..base import InferenceMethod, real_trajectories
 from .discrepancy import Discrepancy
@@ -82,6 +81,5 @@ class SimOpt(InferenceMethod):
         }
 
 
-@register("method", "simopt", SimOptConfig)
 def simopt(cfg: SimOptConfig, comp) -> SimOpt:
     return SimOpt(cfg, comp)

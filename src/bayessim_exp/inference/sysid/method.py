@@ -20,7 +20,6 @@ import torch
 from ...distributions.base import ParameterDistribution
 from ...distributions.mixture import GaussianMixture, TruncatedMixture
 from ...errors import ConfigError, PosteriorError
-from ...registry import register
 from ...stages import RoundContext, Stage
 from ...tasks.base import Task
 from ..base import InferenceMethod, real_trajectories
@@ -109,6 +108,5 @@ class Sysid(InferenceMethod):
         }
 
 
-@register("method", "sysid", SysidConfig)
 def sysid(cfg: SysidConfig, comp) -> Sysid:
     return Sysid(cfg, comp)

@@ -11,9 +11,13 @@ from omegaconf import DictConfig
 from . import registry
 from .distributions.base import ParameterDistribution
 from .errors import ConfigError
+from .inference.base import InferenceMethod
+from .real import RealSource
+from .rl.base import RLComponent
 from .run_config import RunConfig
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
+from .summarizers.base import Summarizer
 from .tasks.base import Task
 
 
@@ -24,11 +28,11 @@ class Components:
     task: Task
     prior: ParameterDistribution
     sims: SimulatorPool
-    summarizer: Any
-    real: Any
+    summarizer: Summarizer
+    real: RealSource
     x_dim: int
-    method: Any = None  # built last: a method may use every other component
-    rl: Any = None
+    method: InferenceMethod | None = None  # built last: a method may use every other component
+    rl: RLComponent | None = None  # None: rl=none
 
     @property
     def device(self) -> torch.device:

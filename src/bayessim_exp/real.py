@@ -16,6 +16,7 @@ import hashlib
 import io
 import logging
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import torch
@@ -31,6 +32,21 @@ log = logging.getLogger(__name__)
 
 
 TRUTHS = ("task", "prior")
+
+
+class RealSource(Protocol):
+    """Where a run's 'real' trajectories come from (an option of the `real` config group)."""
+
+    fingerprint: str | None  # a hash of the data outside the config, bound to the run dir (None: nothing)
+    true_params: np.ndarray | None  # the true parameters where known: for scoring only, never for inference
+
+    def check(self, horizon: int) -> None:
+        """Raise an error now, before any simulation, if the data cannot serve collect.horizon steps."""
+        ...
+
+    def collect(self, round_index: int, policy, horizon: int, seed: int) -> Trajectories | None:
+        """This round's new real trajectories (None: none this round)."""
+        ...
 
 
 @dataclasses.dataclass

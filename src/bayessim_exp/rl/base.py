@@ -1,0 +1,21 @@
+"""What the pipeline asks of an RL component (an option of the `rl` config group; rl=none builds None)."""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+from ..stages import RoundContext, Stage
+
+
+class RLComponent(Protocol):
+    def stages(self) -> list[Stage]:
+        """The round's RL stages, run after the inference method's."""
+        ...
+
+    def actor(self, ctx: RoundContext) -> Any:
+        """The latest trained actor at this point of the round (None before the first), for policy=rl."""
+        ...
+
+    def record(self, ctx: RoundContext) -> dict:
+        """This round's RL fields of results.json."""
+        ...

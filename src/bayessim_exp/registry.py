@@ -1,6 +1,6 @@
 """Registry of components: (group, name) -> factory, with typed, checked parameters.
 
-Every option of a config group (task, prior, policy, summarizer, model, rl, sim, real) is a
+Every option of a config group (task, prior, method, policy, summarizer, model, rl, sim, real) is a
 factory together with a dataclass of its parameters. `build` checks a group's config against that
 dataclass (unknown keys and wrong types are errors that list what is allowed) before calling the
 factory.
@@ -38,7 +38,7 @@ class Entry:
 
 @dataclasses.dataclass(frozen=True)
 class Builtin:
-    """A built-in option by import path, "bayessim_exp.<module>:<attribute>" without the package prefix;
+    """A built-in option by import path, "<module>:<attribute>" with the module relative to the package;
     `params` names the dataclass, which may live in a lighter module than the factory."""
 
     factory: str

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import pysiglib
+import pysiglib.torch_api as siglib
 import torch
 
 from ..errors import ConfigError
@@ -64,9 +66,6 @@ def signature_path(traj: Trajectories, time_augment: bool, lead_lag: bool, basep
 
 def pysiglib_signature(path: torch.Tensor, depth: int, log_signature: bool, threads: int = 1) -> torch.Tensor:
     """pysiglib's signature (no scalar term) or log-signature in the Lyndon "words" basis (method 1)."""
-    import pysiglib
-    import pysiglib.torch_api as siglib
-
     if path.is_cuda and not pysiglib.BUILT_WITH_CUDA:
         raise ConfigError("this pysiglib was built without CUDA: use summarizer.backend=torch on the GPU")
     if not log_signature:

@@ -11,7 +11,7 @@ from .distributions.base import ParameterDistribution
 from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from .errors import ConfigError
 from .registry import register
-from .sim.params import ParamSpec
+from .tasks.params import ParamSpec
 
 
 def _box(spec: ParamSpec) -> tuple[torch.Tensor, torch.Tensor]:

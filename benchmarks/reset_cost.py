@@ -13,6 +13,7 @@ resets after a first (compiling) one.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import statistics
 import time
@@ -57,16 +58,18 @@ def main():
     args = ap.parse_args()
     if args.host_constants:  # the fallback for every constant
         mjx_constants.host_reasons = lambda m, names: dict.fromkeys(names, "--host-constants")
-    cfg = mjx_sim.MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=0, native_below=0, impl=args.impl)
+    base = mjx_sim.MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=0, native_below=0, impl=args.impl, tuning={})
     print(f"device {jax.devices()[0]}, sim.impl={args.impl}, {args.envs} slots, median of {args.reps} resets"
           f"{' (constants on the host)' if args.host_constants else ''}")
     print(f"{'task':<12} {'impl':<5} {'wall s':>8} {'compiled s':>11} {'host s':>8}")
     for name in args.tasks.split(","):
-        task = registry.build("task", api.compose([f"task={name}"]).task)
+        composed = api.compose([f"task={name}", "sim=mjx"])
+        task = registry.build("task", composed.task)
+        cfg = dataclasses.replace(base, tuning=dict(composed.sim.tuning))  # the task's MJX tuning (conf/mjx_tuning)
         params = np.random.default_rng(0).uniform(task.spec.low, task.spec.high, (args.envs, task.spec.dim))
         sim = mjx_sim.MjxSimulator(task, args.envs, cfg)
         wall, compiled = timed_resets(sim, params, args.reps)
-        print(f"{name:<12} {sim.impl:<5} {wall:8.3f} {compiled:11.3f} {wall - compiled:8.3f}", flush=True)
+        print(f"{name:<12} {sim.impl.name:<5} {wall:8.3f} {compiled:11.3f} {wall - compiled:8.3f}", flush=True)
         jax.clear_caches()
 
 

@@ -2,7 +2,7 @@
 
     python benchmarks/sim_throughput.py [--tasks Pendulum,Humanoid] [--envs 8192,32768] [--horizon 100]
         [--native-envs 8192] [--native-horizon 10] [--baseline-envs 8192,131072] [--json out.json]
-        [--compile-only] [--rows mjx-plain,mjx] [--overrides '++task.mjx_tuning.max_geom_pairs=8']
+        [--compile-only] [--rows mjx-plain,mjx] [--overrides '++sim.tuning.max_geom_pairs=8']
         [--impl auto|jax|warp]
 
 Env-steps/s counts control steps (each `frame_skip` physics steps; the physics rate is the product)
@@ -10,12 +10,12 @@ over whole `rollout` calls: resets with per-env parameters (fields and derived c
 the device, mjx_constants; benchmarks/reset_cost.py splits a reset's cost), the open-loop random
 policy's actions, observations, rewards, divergence checks and the trajectories handed to torch. Rows per task:
   native      NativeSimulator on all CPU threads, randomized: the baseline in the same run
-  mjx-plain   plain MJX on the nominal model with the task's mjx_tuning (vmap(mjx.step) in lax.scan,
+  mjx-plain   plain MJX on the nominal model with the task's MJX tuning (conf/mjx_tuning; vmap(mjx.step) in lax.scan,
               random controls, no task code)
   mjx-fixed   MjxSimulator with randomize=False (one model for every slot)
   mjx         MjxSimulator with a parameter set per slot drawn from the prior's box
 The MJX rows run the implementation `--impl` resolves to for each task (sim.impl: JAX, or MuJoCo Warp; auto
-takes a task's `mjx_tuning.impl`), shown in the impl column.
+takes the task's tuning's `impl`), shown in the impl column.
 "randomization overhead" = 1 - mjx / mjx-fixed at the same size (sizes in --baseline-envs). Each figure is the median of
 `--reps` timed calls after a first call (compilation, or a persistent-cache load, included, reported
 as `first s`). `--compile-only` makes the first calls alone, to fill JAX's persistent cache
@@ -25,6 +25,7 @@ as `first s`). `--compile-only` makes the first calls alone, to fill JAX's persi
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import statistics
@@ -37,7 +38,9 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from bayessim_exp import api, registry  # noqa: E402
-from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, jax_setup, resolve_impl  # noqa: E402
+from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
+from bayessim_exp.sim.mjx_impl import resolve_impl  # noqa: E402
+from bayessim_exp.sim.mjx_setup import jax_setup  # noqa: E402
 from bayessim_exp.sim.native import NativeConfig, NativeSimulator  # noqa: E402
 
 
@@ -120,7 +123,7 @@ def main():
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--baseline-envs", default="8192",
                     help="sizes of the mjx-fixed rows (the first also of the mjx-plain row)")
-    ap.add_argument("--overrides", nargs="*", default=[], help="config overrides, e.g. 'task.mjx_tuning={iterations:4}'")
+    ap.add_argument("--overrides", nargs="*", default=[], help="config overrides, e.g. 'sim.tuning.iterations=4'")
     ap.add_argument("--cache-dir", default=None, help="JAX's persistent compilation cache")
     ap.add_argument("--compile-only", action="store_true")
     ap.add_argument("--rows", default="native,mjx-plain,mjx-fixed,mjx",
@@ -129,14 +132,14 @@ def main():
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     jax = jax_setup(args.cache_dir)
-    cfg = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0, native_below=0, impl=args.impl)
+    base = MjxConfig(max_abs_qvel=1.0e4, cache_dir=args.cache_dir, nthread=0, native_below=0, impl=args.impl, tuning={})
     reps = 0 if args.compile_only else args.reps
     rows_wanted = set(args.rows.split(","))
     rows = []
 
     def record(task, backend, envs, horizon, first, median):
         rate = None if median is None else envs * horizon / median
-        rows.append({"task": task.name, "impl": "-" if backend == "native" else resolve_impl(args.impl, task), "backend": backend, "envs": envs, "horizon": horizon,
+        rows.append({"task": task.name, "impl": "-" if backend == "native" else resolve_impl(args.impl, cfg.tuning), "backend": backend, "envs": envs, "horizon": horizon,
                      "frame_skip": task.frame_skip, "first_s": round(first, 2), "median_s": median,
                      "env_steps_per_s": rate})
         shown = "-" if rate is None else f"{rate:,.0f}"
@@ -144,8 +147,9 @@ def main():
               flush=True)
 
     for name in args.tasks.split(","):
-        overrides = [f"task={name}", *args.overrides]
-        task = registry.build("task", api.compose(overrides).task)
+        composed = api.compose([f"task={name}", "sim=mjx", *args.overrides])
+        task = registry.build("task", composed.task)
+        cfg = dataclasses.replace(base, tuning=dict(composed.sim.tuning))  # the task's MJX tuning (conf/mjx_tuning)
         task.name = name  # ShadowHand_more shares its class with ShadowHand
         try:
             if "native" in rows_wanted and not args.compile_only:

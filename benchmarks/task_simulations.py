@@ -24,8 +24,8 @@ from omegaconf import OmegaConf
 from bayessim_exp import api, registry
 from bayessim_exp.components import build_components
 from bayessim_exp.run_config import check_run_config
+from bayessim_exp.sim.trace_cache import model_bytes
 from bayessim_exp.sim.trajectories import Trajectories
-from bayessim_exp.tasks.base import model_bytes
 
 DEFAULT_CACHE = Path("/tmp/bayessim_inference_tasks")
 _BLOCK = 2048  # simulations per cached block; each block has its own seed

@@ -26,10 +26,10 @@ def _app(cfg: DictConfig) -> float:
 
     hydra_cfg = HydraConfig.get()
     out_dir = hydra_cfg.runtime.output_dir
-    if hydra_cfg.mode == RunMode.RUN and "impl" in cfg.get("sim", {}):
-        from .sim.mjx import leave_out_warp  # imports torch, as above
+    if hydra_cfg.mode == RunMode.RUN:
+        from .sim.mjx_impl import settle_for_one_run  # imports torch, as above
 
-        leave_out_warp(cfg.sim.impl, cfg.task.get("mjx_tuning") or {})  # this process simulates this task only
+        settle_for_one_run(cfg.get("sim", {}))  # this process simulates this run's task only
     try:
         results = run(cfg, out_dir)
     except Exception as exc:  # noqa: BLE001 - every failure is reported; a sweep must go on

@@ -10,7 +10,7 @@ import torch
 from .distributions.base import ParameterDistribution
 from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from .errors import ConfigError
-from .sim.params import ParamSpec
+from .tasks.params import ParamSpec
 
 
 def _box(spec: ParamSpec) -> tuple[torch.Tensor, torch.Tensor]:

@@ -222,9 +222,9 @@ def option_defaults(group: str, name: str) -> dict:
     path = CONF_DIR / group / f"{name}.yaml"
     if not path.is_file():
         return {}
-    values = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
-    values.pop("defaults", None)
-    return values
+    values = OmegaConf.load(path)
+    values.pop("defaults", None)  # before resolving: a defaults list may name other groups' choices (${task})
+    return OmegaConf.to_container(values, resolve=True)
 
 
 def build(group: str, cfg: DictConfig | dict, **deps: Any) -> Any:

@@ -31,7 +31,8 @@ SENSOR_ATOL = 1e-2
 def test_the_yaml_only_task_simulates_on_mjx_as_on_native(compose):
     task = registry.build("task", compose(["task=mjcf"]).task)
     params = np.array([[0.1, 0.5], [0.5, 0.5], [0.1, 1.0]])
-    sim = MjxSimulator(task, 3, MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto"))
+    sim = MjxSimulator(task, 3, MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto",
+                                                   tuning={}))
     native = NativeSimulator(task, 3, NativeConfig(nthread=1, max_abs_qvel=1.0e4), model=sim.mj_model)
     start = task.reset_state(np.random.default_rng(0), 1)
     state = {k: np.repeat(v, 3, 0) for k, v in start.items()}

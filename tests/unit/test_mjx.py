@@ -24,16 +24,24 @@ from bayessim_exp.sim.native import NativeConfig, NativeSimulator
 pytest.importorskip("mujoco.mjx")
 from bayessim_exp.errors import ConfigError  # noqa: E402
 from bayessim_exp.sim import mjx as sim_mjx  # noqa: E402
-from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator, resolve_impl  # noqa: E402
+from bayessim_exp.sim import mjx_impl, mjx_setup  # noqa: E402
+from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
+from bayessim_exp.sim.mjx_impl import JaxImpl, WarpImpl, resolve_impl  # noqa: E402
 
 pytestmark = pytest.mark.slow
 NATIVE = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
-MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto")
+MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto", tuning={})
 # horizon (control steps) and tolerance on every observation, per task: the contact task's
 # trajectories part faster (float32 contact solver against float64), so it is compared over fewer steps;
 # Cartpole's MJX tuning stops the solver after 4 iterations, where MJX and MuJoCo are not at the same
 # point of the friction-loss rows yet (measured 1.8e-3; 1e-3 held with the stock 100 iterations)
 CASES = {"Pendulum": (20, 1e-3), "Cartpole": (20, 3e-3), "BallBalance": (5, 1e-2)}
+
+
+def mjx_for(compose, name, *overrides):
+    """MJX's settings above with the task's tuning as sim=mjx composes it (conf/mjx_tuning)."""
+    tuning = compose([f"task={name}", "sim=mjx", *overrides]).sim.tuning
+    return dataclasses.replace(MJX, tuning=dict(tuning))
 
 
 def params_for(task, n, seed=0):
@@ -46,7 +54,7 @@ def test_mjx_trajectories_match_native(compose, name):
     horizon, tol = CASES[name]
     task = registry.build("task", compose([f"task={name}"]).task)
     params = params_for(task, 3)
-    sim = MjxSimulator(task, 3, MJX)  # MuJoCo Warp where it is installed and the GPU is NVIDIA's, else JAX
+    sim = MjxSimulator(task, 3, mjx_for(compose, name))  # MuJoCo Warp where it is installed and the GPU is NVIDIA's, else JAX
     native = NativeSimulator(task, 3, NATIVE, model=sim.mj_model).rollout(params, RandomPolicy(task.action_dim, 1),
                                                                         horizon, seed=2)
     fused = sim.rollout(params, RandomPolicy(task.action_dim, 1), horizon, seed=2)
@@ -60,7 +68,7 @@ def test_mjx_trajectories_match_native(compose, name):
 def test_fused_rollout_equals_step_by_step_and_single_slots_reset(compose):
     task = registry.build("task", compose(["task=Pendulum"]).task)
     params = params_for(task, 4)
-    sim = MjxSimulator(task, 4, MJX)
+    sim = MjxSimulator(task, 4, mjx_for(compose, "Pendulum"))
     fused = sim.rollout(params, RandomPolicy(1, 3), 10, seed=5)
     generic = super(MjxSimulator, sim).rollout(params, RandomPolicy(1, 3), 10, seed=5)
     for field in ("states", "actions", "rewards", "valid", "diverged"):
@@ -90,10 +98,11 @@ def test_diverging_slot_is_flagged_and_kept_apart():
 
 
 def test_small_batches_run_on_native_mujoco_with_the_tuned_model(compose):
-    task = registry.build("task", compose(["task=Cartpole"]).task)
-    make = registry.build("sim", {"name": "mjx", "native_below": 16, "cache_dir": None})
+    cfg = compose(["task=Cartpole", "sim=mjx", "sim.native_below=16", "sim.cache_dir=null"])
+    task = registry.build("task", cfg.task)
+    make = registry.build("sim", cfg.sim)
     small, large = make(task, 4), make(task, 16)
-    assert isinstance(small, NativeSimulator) and small.model.opt.iterations == task.mjx_model.opt.iterations != 100
+    assert isinstance(small, NativeSimulator) and small.model.opt.iterations == cfg.sim.tuning.iterations != 100
     assert isinstance(large, MjxSimulator)
 
 
@@ -101,24 +110,25 @@ def test_implementation_is_chosen_or_refused_clearly(compose):
     import jax
 
     with pytest.raises(ConfigError, match="sim.impl"):
-        MjxConfig(max_abs_qvel=1.0, cache_dir=None, nthread=1, native_below=0, impl="cuda").validate()
+        dataclasses.replace(MJX, impl="cuda").validate()
     if not any(d.platform == "gpu" for d in jax.devices()):
         assert resolve_impl("auto") == resolve_impl("jax") == "jax"
         with pytest.raises(ConfigError, match="NVIDIA GPU and warp-lang"):
             resolve_impl("warp")
     humanoid = registry.build("task", compose(["task=Humanoid"]).task)
+    tuning = mjx_for(compose, "Humanoid").tuning
     # MJX's JAX implementation needs condim >= 3 with elliptic cones; MuJoCo Warp simulates the MJCF's
-    assert humanoid.mjx_model.geom_condim.min() == 3 and humanoid.warp_model.geom_condim.min() == 1
-    assert humanoid.warp_buffer("constraints_per_env") == 64  # MuJoCo Warp's default
-    hand = registry.build("task", compose(["task=ShadowHand"]).task)
-    assert hand.warp_buffer("constraints_per_env") == 192 and hand.warp_model.opt.iterations == 5
+    assert JaxImpl(tuning).model(humanoid).geom_condim.min() == 3 and WarpImpl(tuning).model(humanoid).geom_condim.min() == 1
+    assert WarpImpl(tuning).data_sizes(2)["njmax"] == 64  # MuJoCo Warp's default
+    hand, hand_tuning = registry.build("task", compose(["task=ShadowHand"]).task), mjx_for(compose, "ShadowHand").tuning
+    assert WarpImpl(hand_tuning).data_sizes(2)["njmax"] == 192 and WarpImpl(hand_tuning).model(hand).opt.iterations == 5
     with pytest.raises(ConfigError, match="contacts_per_env"):
-        registry.build("task", compose(["task=Pendulum", "++task.mjx_tuning.contacts_per_env=0"]).task)
+        registry.build("sim", compose(["task=Pendulum", "sim=mjx", "sim.tuning.contacts_per_env=0"]).sim)
     # a task may prefer MJX's JAX implementation where it is the faster one (Pendulum); sim.impl decides when set
-    pendulum = registry.build("task", compose(["task=Pendulum"]).task)
-    assert resolve_impl("auto", pendulum) == "jax" and resolve_impl("auto", hand) == resolve_impl("auto")
-    with pytest.raises(ConfigError, match="mjx_tuning.impl"):
-        registry.build("task", compose(["task=Pendulum", "task.mjx_tuning.impl=warp"]).task)
+    pendulum_tuning = mjx_for(compose, "Pendulum").tuning
+    assert resolve_impl("auto", pendulum_tuning) == "jax" and resolve_impl("auto", hand_tuning) == resolve_impl("auto")
+    with pytest.raises(ConfigError, match="sim.tuning.impl"):
+        registry.build("sim", compose(["task=Pendulum", "sim=mjx", "sim.tuning.impl=warp"]).sim)
 
 
 def test_a_later_simulator_loads_the_traced_programs_instead_of_tracing(compose, tmp_path, monkeypatch):
@@ -126,7 +136,7 @@ def test_a_later_simulator_loads_the_traced_programs_instead_of_tracing(compose,
 
     monkeypatch.setattr(sim_mjx, "jax_setup", lambda cache_dir: jax)  # JAX's compilation cache is global: left off
     task = registry.build("task", compose(["task=Pendulum"]).task)
-    cfg, params = dataclasses.replace(MJX, cache_dir=str(tmp_path)), params_for(task, 4)
+    cfg, params = dataclasses.replace(mjx_for(compose, "Pendulum"), cache_dir=str(tmp_path)), params_for(task, 4)
     first = MjxSimulator(task, 4, cfg).rollout(params, RandomPolicy(1, 0), 5, seed=0)
     later = MjxSimulator(task, 4, cfg)
     again = later.rollout(params, RandomPolicy(1, 0), 5, seed=0)
@@ -135,16 +145,18 @@ def test_a_later_simulator_loads_the_traced_programs_instead_of_tracing(compose,
 
 
 def test_a_single_job_on_jax_leaves_warp_out(monkeypatch):
-    monkeypatch.setattr(sim_mjx, "_LEAVE_OUT_WARP", False)
-    assert sim_mjx.leave_out_warp("jax", {}) and sim_mjx.leave_out_warp("auto", {"impl": "jax"})
-    assert not sim_mjx.leave_out_warp("auto", {}) and not sim_mjx.leave_out_warp("warp", {"impl": "jax"})
+    monkeypatch.setattr(mjx_setup, "_WARP_LEFT_OUT", False)
+    settle = mjx_impl.settle_for_one_run
+    assert settle({"impl": "jax"}) and settle({"impl": "auto", "tuning": {"impl": "jax"}})
+    assert not settle({"impl": "auto", "tuning": {}}) and not settle({"impl": "warp", "tuning": {"impl": "jax"}})
+    assert not settle({"name": "native"})
 
 
 _IMPORT_MJX = """
 import sys
-from bayessim_exp.sim import mjx as sim_mjx
-sim_mjx.leave_out_warp(sys.argv[1], {})
-sim_mjx.import_mjx()
+from bayessim_exp.sim import mjx_impl, mjx_setup
+mjx_impl.settle_for_one_run({"impl": sys.argv[1], "tuning": {}})
+mjx_setup.import_mjx()
 from mujoco.mjx import warp
 assert not warp.WARP_INSTALLED and 'warp' not in sys.modules
 """
@@ -168,8 +180,9 @@ def test_slots_whose_constraint_rows_overflow_warp_count_as_diverged(compose):
     if resolve_impl("auto") != "warp":
         pytest.skip("MuJoCo Warp needs warp-lang and an NVIDIA GPU")
     # Cartpole's two friction-loss rows are always there: one row of buffer drops a row in every slot
-    small = registry.build("task", compose(["task=Cartpole", "++task.mjx_tuning.constraints_per_env=1"]).task)
+    small = mjx_for(compose, "Cartpole", "sim.tuning.constraints_per_env=1")
     task = registry.build("task", compose(["task=Cartpole"]).task)
     params = params_for(task, 4)
-    assert MjxSimulator(small, 4, MJX).rollout(params, RandomPolicy(1, 0), 5, seed=0).diverged.all()
-    assert not MjxSimulator(task, 4, MJX).rollout(params, RandomPolicy(1, 0), 5, seed=0).diverged.any()
+    assert MjxSimulator(task, 4, small).rollout(params, RandomPolicy(1, 0), 5, seed=0).diverged.all()
+    assert not MjxSimulator(task, 4, mjx_for(compose, "Cartpole")).rollout(params, RandomPolicy(1, 0), 5,
+                                                                            seed=0).diverged.any()

@@ -5,6 +5,7 @@ only. The constants alone compile in seconds on a CPU, contact tasks included (n
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")  # a compiled MJX loop on CPU has hung without it
@@ -21,13 +22,18 @@ pytest.importorskip("mujoco.mjx")
 from bayessim_exp.sim import mjx_constants  # noqa: E402
 from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
 from bayessim_exp.sim.mjx_constants import host_reasons  # noqa: E402
-from bayessim_exp.sim.params import model_field  # noqa: E402
+from bayessim_exp.tasks.params import model_field  # noqa: E402
 
 pytestmark = pytest.mark.slow
-MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto")
+MJX = MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="auto", tuning={})
 # float32 on the device against float64 MuJoCo: inv(M) of the humanoid (23 dofs, masses from 0.1 to 8 kg)
 # loses more digits than the small models' (measured max relative error 2.2e-5; the others below 3e-6)
 RTOL = {"Pendulum": 1e-5, "Cartpole": 1e-5, "BallBalance": 1e-5, "Ingenuity": 1e-5, "Humanoid": 1e-4}
+
+
+def mjx_for(compose, name):
+    """MJX's settings above with the task's tuning (conf/mjx_tuning)."""
+    return dataclasses.replace(MJX, tuning=dict(compose([f"task={name}", "sim=mjx"]).sim.tuning))
 
 
 def params_for(task, n, seed):
@@ -39,8 +45,8 @@ def test_device_leaves_equal_mujoco_set_const(compose, name):
     task = registry.build("task", compose([f"task={name}"]).task)
     n = 6
     params = params_for(task, n, seed=3)
-    sim = MjxSimulator(task, n, MJX)
-    warp_shared = {"dof_M0"} if sim.impl == "warp" else set()
+    sim = MjxSimulator(task, n, mjx_for(compose, name))
+    warp_shared = {"dof_M0"} if sim.impl.name == "warp" else set()
     assert not sim._host  # every varying constant of these tasks is computed on the device
     leaves = sim.jax.jit(sim._slot_leaves)(sim.jnp.asarray(params, sim.jnp.float32))
     batch = mujoco.batch.Batch(task.model, n, nthread=1)
@@ -62,10 +68,10 @@ def test_device_leaves_equal_mujoco_set_const(compose, name):
 def test_trajectories_equal_the_host_path_and_resets_touch_their_slots_only(compose, monkeypatch, name):
     task = registry.build("task", compose([f"task={name}"]).task)
     params = params_for(task, 3, seed=4)
-    device = MjxSimulator(task, 3, MJX)
+    device = MjxSimulator(task, 3, mjx_for(compose, name))
     with monkeypatch.context() as patch:  # every constant through mujoco.batch's set_const, as before the port
         patch.setattr(mjx_constants, "host_reasons", lambda m, names: dict.fromkeys(names, "test"))
-        host = MjxSimulator(task, 3, MJX)
+        host = MjxSimulator(task, 3, mjx_for(compose, name))
     assert not device._host and set(host._host) == set(device._constants.names) != set()
     # a first reset with nominal parameters in every slot: set_const leaves the constants shared, and the
     # host copies take the model's

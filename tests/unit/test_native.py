@@ -43,8 +43,7 @@ def native(task, n):
 def spring_task():
     # explicit Euler on x'' = -k/m x is unstable once dt * sqrt(k/m) is large: k=1e6, m=0.01 blows up
     cfg = TaskConfig(parameters={"k": {"range": [1.0, 1.0e6], "operation": "set", "targets": ["jnt_stiffness[slide]"]}},
-                     real_params={"k": 10.0}, control_dt=0.02, episode_length=200,
-                     mjx_tuning={})
+                     real_params={"k": 10.0}, control_dt=0.02, episode_length=200)
     return Spring(cfg)
 
 
@@ -110,7 +109,7 @@ class Marker(Task):
 
 def test_first_observation_after_reset_reads_derived_fields():
     cfg = TaskConfig(parameters={"m": {"range": [0.5, 2.0], "targets": ["body_mass[bob]"]}}, real_params={"m": 1.0}, control_dt=0.05,
-                     episode_length=200, mjx_tuning={})
+                     episode_length=200)
     sim = native(Marker(cfg), 2)
     obs = sim.reset(np.ones((2, 1)), None, seed=0)
     np.testing.assert_allclose(obs[:, 0], 1.5)  # site_xpos computed at the reset state, not zeros

@@ -6,7 +6,7 @@ import pytest
 
 from bayessim_exp.errors import ConfigError
 from bayessim_exp.sim.native import NativeSimulator
-from bayessim_exp.sim.params import ParamSpec
+from bayessim_exp.tasks.params import ParamSpec
 
 XML = """
 <mujoco>

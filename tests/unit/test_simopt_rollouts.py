@@ -46,3 +46,20 @@ def test_a_task_that_cannot_restart_from_observations_uses_its_reset_distributio
         obs = simulate_like_real(sims, torch.as_tensor(task.real_values[None]), real, None, "recorded", 1)
     assert "cannot restart from an observed state" in caplog.text
     assert (obs[0, :, 0] - real.states[:, 0].double()).abs().max() > 1e-3
+
+
+def test_a_short_last_chunk_runs_padded_in_the_chunk_sized_simulator(compose):
+    """SimOpt rolls out through the pool's one chunked path: where each size is a compilation (MJX), 9 rows in
+    chunks of 4 build one simulator, not a second for the last row."""
+    from bayessim_exp.sim.native import NativeConfig, NativeSimulator
+
+    class CompilingNative(NativeSimulator):
+        compiles_per_size = True
+
+    task, _, real = setup(compose, "Pendulum")
+    config = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
+    sims = SimulatorPool(lambda t, n: CompilingNative(t, n, config), task, 4)
+    theta = torch.as_tensor(np.repeat(task.real_values[None], 3, 0))
+    obs = simulate_like_real(sims, theta, real, None, "recorded", seed=1)
+    assert sorted(sims._sims) == [4]
+    torch.testing.assert_close(obs[2], real.states.double(), atol=1e-5, rtol=0)

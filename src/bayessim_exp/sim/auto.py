@@ -5,7 +5,8 @@ from __future__ import annotations
 import logging
 
 from ..registry import register
-from .mjx import MjxConfig, gpu_visible, mjx_backend
+from .mjx import MjxConfig, mjx_backend
+from .mjx_setup import gpu_visible
 from .native import NativeConfig, native_backend
 
 log = logging.getLogger(__name__)

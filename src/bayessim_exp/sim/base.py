@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from ..tasks.base import Task
-from .params import ParamSpec
+from ..tasks.params import ParamSpec
 from .trajectories import Trajectories
 
 

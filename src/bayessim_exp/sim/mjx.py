@@ -1,7 +1,7 @@
 """GPU backend: N MJX simulations of one task, each with its own parameters.
 
-Two implementations behind MJX's one API (`sim.impl`): MJX's JAX re-implementation of MuJoCo, and MuJoCo
-Warp (NVIDIA GPUs, warp-lang installed), which is several times faster on contact-rich tasks.
+MJX's implementation (JAX or MuJoCo Warp) is chosen once per simulator (mjx_impl.py), the task's model
+tuned for it (mjx_tuning.py, `sim.tuning`).
 
 Per-environment parameters are batched leaves of one `mjx.Model` (`jax.vmap` with in_axes 0 over the
 fields the ParamSpec touches, None elsewhere). A reset uploads the parameters [N, D] alone: the fields
@@ -21,34 +21,28 @@ spreads NaNs nor keeps the solver iterating, and it stays flagged until its next
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import hashlib
-import importlib.util
-import io
 import logging
-import os
-import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-# before jax is imported anywhere: JAX and torch share the GPU instead of JAX taking 75 % of it up front
-os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+import mujoco
+import numpy as np
+import torch
+from mujoco import batch as mjbatch
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from mujoco import batch as mjbatch  # noqa: E402
-
-from ..errors import ConfigError  # noqa: E402
-from ..registry import register  # noqa: E402
-from ..tasks.base import Task, model_bytes  # noqa: E402
-from .base import Policy, Simulator, broke_down  # noqa: E402
-from .native import NativeConfig, NativeSimulator  # noqa: E402
-from .params import ParamSpec, model_field  # noqa: E402
-from .trace_cache import ExportedJit, code_fingerprint  # noqa: E402
-from .trajectories import Trajectories  # noqa: E402
+from ..errors import ConfigError
+from ..registry import register
+from ..tasks.base import Task
+from ..tasks.params import ParamSpec, model_field
+from .base import Policy, Simulator, broke_down
+from .mjx_impl import IMPLS, implementation, resolve_impl
+from .mjx_setup import import_mjx, jax_setup
+from .mjx_tuning import check_tuning
+from .native import NativeConfig, NativeSimulator
+from .trace_cache import ExportedJit, code_fingerprint, program_key
+from .trajectories import Trajectories
 
 # fields MJX reads while tracing (collision pairs, sparsity, solver choice): one value for every slot
 _STATIC_FIELDS = frozenset({"geom_contype", "geom_conaffinity", "geom_condim", "geom_type", "geom_priority",
@@ -60,7 +54,6 @@ _STEP_INPUTS = ("time", "qpos", "qvel", "act", "history", "qacc_warmstart", "plu
 _PROBES = 8  # random parameter sets (besides the bounds) that decide which derived constants vary
 log = logging.getLogger(__name__)
 _LOGGED: set[tuple] = set()  # (task, implementation) and (task, constants on the host) already reported
-_LEAVE_OUT_WARP = False  # set by leave_out_warp: this process simulates on MJX's JAX implementation only
 
 
 @dataclasses.dataclass
@@ -70,108 +63,14 @@ class MjxConfig:
     nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: all)
     native_below: int  # batches smaller than this run on native MuJoCo (the tuned model) on CPU threads
     impl: str  # jax, warp, or auto: warp where warp-lang is installed and the GPU is NVIDIA's
+    tuning: dict[str, Any]  # the task's model tuned for MJX (mjx_tuning.py; conf/mjx_tuning/<task>.yaml)
 
     def validate(self) -> None:
         if self.max_abs_qvel <= 0 or self.nthread < 0 or self.native_below < 0:
             raise ConfigError("max_abs_qvel must be > 0, nthread and native_below >= 0")
         if self.impl not in IMPLS:
             raise ConfigError(f"sim.impl={self.impl!r} not allowed; allowed: {', '.join(IMPLS)}")
-
-
-IMPLS = ("auto", "jax", "warp")
-
-
-def resolve_impl(impl: str, task: Task | None = None) -> str:
-    """MJX's implementation for `impl` on this machine; warp asked for where it cannot run is an error.
-    auto: the task's `mjx_tuning.impl` where it names one (docs/tasks.md), else Warp where it can run."""
-    if _jax_chosen(impl, task.cfg.mjx_tuning if task is not None else {}):
-        return "jax"
-    import jax
-
-    nvidia = any(d.platform == "gpu" and "nvidia" in d.device_kind.lower() for d in jax.devices())
-    if impl == "auto" and not nvidia:
-        return "jax"
-    import_mjx()
-    from mujoco.mjx import warp as mjx_warp
-
-    if mjx_warp.WARP_INSTALLED and nvidia:
-        return "warp"
-    if impl == "warp":
-        raise ConfigError("sim.impl=warp needs an NVIDIA GPU and warp-lang (pip install -e '.[warp]')")
-    return "jax"
-
-
-def _jax_chosen(impl: str, mjx_tuning: Mapping) -> bool:
-    """sim.impl=jax, or auto where the task's tuning prefers JAX: decided without asking the machine."""
-    return impl == "jax" or (impl == "auto" and mjx_tuning.get("impl") == "jax")
-
-
-def leave_out_warp(impl: str, mjx_tuning: Mapping) -> bool:
-    """Called by a process that runs one job (`python -m bayessim_exp` without --multirun) with that
-    job's sim.impl and task tuning: when they resolve to MJX's JAX implementation, MJX is imported
-    without MuJoCo Warp, which MJX otherwise imports whenever warp-lang is installed (the larger part of
-    importing MJX on the H100 machine, docs/benchmarks.md). Processes that may simulate another task
-    later (--multirun, the Python API) keep MJX's own import. Returns whether Warp is left out."""
-    global _LEAVE_OUT_WARP
-    _LEAVE_OUT_WARP = _jax_chosen(impl, mjx_tuning)
-    return _LEAVE_OUT_WARP
-
-
-def import_mjx() -> Any:
-    """mujoco.mjx, imported without MuJoCo Warp where leave_out_warp decided so (and nothing else
-    imported warp-lang before)."""
-    if "mujoco.mjx" not in sys.modules:
-        leave_out = _LEAVE_OUT_WARP and "warp" not in sys.modules and importlib.util.find_spec("warp") is not None
-        if leave_out:
-            sys.modules["warp"] = None  # type: ignore[assignment]  # `import warp` fails: MJX records Warp as absent
-        try:
-            # MJX prints every failed import of Warp (as on an install without warp-lang) and Warp its banner
-            with contextlib.redirect_stdout(io.StringIO()):
-                import mujoco.mjx  # noqa: F401
-        finally:
-            if leave_out:
-                del sys.modules["warp"]
-        if leave_out:
-            log.info("sim=mjx: MJX imported without MuJoCo Warp (this run simulates with MJX's JAX implementation)")
-    from mujoco import mjx
-
-    return mjx
-
-
-def jax_setup(cache_dir: str | None) -> Any:
-    """Import jax with the persistent compilation cache in `cache_dir` (None: off)."""
-    import jax
-
-    if cache_dir:
-        jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache_dir)))
-        # every program, the small ones too: together they took 0.3 s of a warm run to compile again
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
-    return jax
-
-
-def gpu_visible() -> bool:
-    """JAX sees a GPU (and MJX is installed). Without a GPU driver on the machine JAX is not asked:
-    importing it and MJX takes 1.7 s on the 2-core development machine."""
-    if not any(os.path.exists(p) for p in ("/dev/nvidiactl", "/dev/kfd", "/proc/driver/nvidia/gpus")):
-        return False
-    try:
-        import jax
-
-        import_mjx()
-    except ImportError:
-        return False
-    return any(d.platform == "gpu" for d in jax.devices())
-
-
-def _quiet_solver(mx: Any) -> Any:
-    """MuJoCo Warp prints a line per step in which a world reached its solver or line-search
-    iteration cap; the tuned models cap iterations on purpose, and the printing cost more than the steps
-    (measured on the H100). Overflows of the contact and constraint buffers are still reported."""
-    from mujoco.mjx.third_party.mujoco_warp._src.types import OverflowType
-
-    quiet = ~int(OverflowType.ITERATIONS | OverflowType.LS_ITERATIONS)
-    warp_opt = mx.opt._impl
-    return mx.replace(opt=mx.opt.replace(_impl=warp_opt.replace(warn_overflow=warp_opt.warn_overflow & quiet)))
+        check_tuning(self.tuning)
 
 
 def to_torch(x: Any) -> torch.Tensor:
@@ -196,31 +95,27 @@ class MjxSimulator(Simulator):
         # (uncommitted first inputs and committed outputs would compile everything twice)
         self._dev = jax.devices()[0]
         m = task.model
-        self.impl = resolve_impl(cfg.impl, task)
-        self.mj_model = task.tuned_model(self.impl)
-        self.nominal = mjx.put_model(self.mj_model, impl=self.impl)
-        # MuJoCo Warp keeps contacts of all environments in one buffer, constraint rows per environment
-        self._data_sizes = dict(impl="warp", naconmax=num_envs * task.warp_buffer("contacts_per_env"),
-                                njmax=task.warp_buffer("constraints_per_env")) if self.impl == "warp" else {}
+        self.impl = implementation(cfg.impl, cfg.tuning)
+        self.mj_model = self.impl.model(task)
+        self.nominal = self.impl.put_model(mjx, self.mj_model)
+        self._data_sizes = self.impl.data_sizes(num_envs)
         # the derived constants are computed by MJX's JAX functions, whichever implementation steps
-        self._jax_nominal = self.nominal
-        if self.impl == "warp":
-            self.nominal = _quiet_solver(self.nominal)
-            self._jax_nominal = mjx.put_model(task.mjx_model, impl="jax")  # the constants do not depend on condim
+        self._jax_nominal = self.impl.constants_model(mjx, task, self.nominal)
         constants = self._varying_constants() if randomize and task.spec.needs_set_const else []
-        if self.impl == "warp":  # MuJoCo Warp keeps some derived constants (dof_M0) one for all worlds
-            shared = [n for n in constants if not _warp_batchable(n)]
-            if shared:
-                log.info("sim.impl=warp: %s stay nominal in every slot (MuJoCo Warp does not batch them)", shared)
-            constants = [n for n in constants if n not in shared]
+        # MuJoCo Warp keeps some derived constants (dof_M0) one for all worlds
+        shared = [n for n in constants if not self.impl.batchable(n)]
+        if shared:
+            log.info("sim.impl=%s: %s stay nominal in every slot (MuJoCo Warp does not batch them)", self.impl.name,
+                     shared)
+        constants = [n for n in constants if n not in shared]
         names = list(task.spec.fields) + constants if randomize else []
         for name in names:
             leaf = model_field(self.nominal, name)
             if not isinstance(leaf, jax.Array) or not jax.numpy.issubdtype(leaf.dtype, jax.numpy.floating):
                 raise ConfigError(f"sim=mjx cannot set {name} per simulation: MJX keeps it static")
-            if self.impl == "warp" and not _warp_batchable(name):
-                raise ConfigError(f"sim.impl=warp cannot set {name} per simulation (MuJoCo Warp shares it "
-                                  "between environments); use sim.impl=jax")
+            if not self.impl.batchable(name):
+                raise ConfigError(f"sim.impl={self.impl.name} cannot set {name} per simulation (MuJoCo Warp shares "
+                                  "it between environments); use sim.impl=jax")
         on_host = host_reasons(m, constants)
         if on_host and (task.name, tuple(on_host)) not in _LOGGED:
             _LOGGED.add((task.name, tuple(on_host)))
@@ -248,11 +143,12 @@ class MjxSimulator(Simulator):
         """jax.jit, or where `cache_dir` is set and MJX runs its JAX implementation, a jit whose traced
         program is kept across runs (trace_cache.py; MuJoCo Warp's kernels are not exportable). The key:
         the compiled model and everything else the compiled functions read from this simulator."""
-        if self.cfg.cache_dir is None or self.impl != "jax":
+        if self.cfg.cache_dir is None or not self.impl.keeps_traces:
             return lambda fn, out_like: self.jax.jit(fn)
         described = repr((type(self.task).__module__, type(self.task).__qualname__, self.task.cfg, self.cfg.max_abs_qvel,
-                          self.randomize, names, constants, on_host, self._data_sizes, code_fingerprint()))
-        key = hashlib.sha1(model_bytes(self.mj_model) + described.encode()).hexdigest()
+                          self.cfg.tuning, self.randomize, names, constants, on_host, self._data_sizes,
+                          code_fingerprint()))
+        key = program_key(self.mj_model, described)
         directory = Path(str(self.cfg.cache_dir)).expanduser() / "traces"
         return lambda fn, out_like: ExportedJit(fn, f"{fn.__name__}:{key}", directory, out_like)
 
@@ -341,7 +237,7 @@ class MjxSimulator(Simulator):
         def substep(_, carry):
             d, overflowed = carry
             d = step(mx, d)
-            return d, overflowed | self._rows_dropped(d)
+            return d, overflowed | self.impl.rows_dropped(d, jnp)
 
         data, overflowed = jax.lax.fori_loop(0, self.task.frame_skip, substep,
                                              (data, jnp.zeros(obs.shape[0], bool)))
@@ -355,13 +251,6 @@ class MjxSimulator(Simulator):
         reward = jnp.asarray(self.task.reward(obs, actions, new_obs, xp=jnp), jnp.float32)
         terminated = jnp.asarray(self.task.terminated(new_obs, xp=jnp), bool)
         return data, new_obs, held, reward, terminated, now_broken
-
-    def _rows_dropped(self, data):
-        """Per slot: MuJoCo Warp dropped constraint rows over its buffer (`constraints_per_env`), so the
-        step's physics is wrong; the slot counts as diverged. MJX's JAX implementation sizes them fully."""
-        if self.impl != "warp":
-            return self.jnp.zeros(data.qpos.shape[0], bool)
-        return data._impl.nefc > self._data_sizes["njmax"]
 
     # the protocol ------------------------------------------------------------------------------
     def _reset(self, params: torch.Tensor, ids: torch.Tensor, state: dict[str, np.ndarray]) -> torch.Tensor:
@@ -438,12 +327,6 @@ class MjxSimulator(Simulator):
         return (data, obs, broken, states, acts.transpose(1, 0, 2), rewards.T, valid.T, diverged)
 
 
-def _warp_batchable(name: str) -> bool:
-    from mujoco.mjx.warp import types as warp_types
-
-    return bool(warp_types._BATCH_DIM["Model"].get(name[4:] if name.startswith("opt.") else name, False))
-
-
 def _where(jnp: Any, mask: Any, a: Any, b: Any) -> Any:
     """Per slot: a where mask, else b, over every leaf of two batched pytrees."""
     import jax
@@ -460,12 +343,12 @@ def mjx_backend(cfg: MjxConfig):
     resolve_impl(cfg.impl)  # sim.impl=warp where it cannot run fails here, before any stage
 
     def make(task: Task, num_envs: int) -> Simulator:
-        impl = resolve_impl(cfg.impl, task)
-        if (task.name, impl) not in _LOGGED:
-            _LOGGED.add((task.name, impl))
-            log.info("sim=mjx %s: MJX implementation %s (sim.impl=%s)", task.name, impl, cfg.impl)
+        impl = implementation(cfg.impl, cfg.tuning)
+        if (task.name, impl.name) not in _LOGGED:
+            _LOGGED.add((task.name, impl.name))
+            log.info("sim=mjx %s: MJX implementation %s (sim.impl=%s)", task.name, impl.name, cfg.impl)
         if num_envs < cfg.native_below:
-            return NativeSimulator(task, num_envs, native, model=task.tuned_model(impl))
+            return NativeSimulator(task, num_envs, native, model=impl.model(task))
         return MjxSimulator(task, num_envs, cfg)
 
     return make

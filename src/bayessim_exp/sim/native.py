@@ -13,8 +13,8 @@ from mujoco import batch as mjbatch
 from ..errors import ConfigError
 from ..registry import register
 from ..tasks.base import Task
+from ..tasks.params import ParamSpec
 from .base import Simulator, broke_down
-from .params import ParamSpec
 
 # warnings that mean the integration broke down (MuJoCo then silently resets the data)
 _DIVERGENCE_WARNINGS = [

@@ -24,6 +24,9 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+import mujoco
+import numpy as np
+
 log = logging.getLogger(__name__)
 _PACKAGES = ("jax", "jaxlib", "mujoco", "mujoco-mjx")
 
@@ -114,3 +117,15 @@ class ExportedJit:
             log.warning("trace cache: cannot keep %s in %s (%s)", getattr(self.fn, "__name__", self.fn),
                         self.directory, exc)
         return jax.jit(exported.call)
+
+
+def model_bytes(model: mujoco.MjModel) -> bytes:
+    """The compiled model as MuJoCo saves it (MJB): equal bytes, equal model, for cache keys."""
+    out = np.empty(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, out)
+    return out.tobytes()
+
+
+def program_key(model: mujoco.MjModel, described: str) -> str:
+    """A key of ExportedJit's programs: the compiled model and the caller's description of the rest."""
+    return hashlib.sha1(model_bytes(model) + described.encode()).hexdigest()

@@ -16,25 +16,9 @@ import mujoco
 import numpy as np
 
 from ..errors import ConfigError
-from ..sim.params import ParamConfig, ParamSpec, nominal_value
+from .params import ParamConfig, ParamSpec, nominal_value
 
 ASSETS = Path(__file__).parent / "assets"
-# what mjx_tuning may change (MJX_TUNING), the model first (MODEL_TUNING): solver iterations and line-search iterations (MjOption), MJX's contact
-# caps (custom numerics it reads: contacts per geom pair, geom pairs per collision function), the
-# smallest geom condim (MJX's JAX implementation has no frictionless contacts with elliptic cones),
-# MuJoCo Warp's buffers per environment (contacts, constraint rows; what overflows them is dropped), and
-# `impl: jax` where MJX's JAX implementation is the faster one for the task (sim.impl=auto takes it)
-MODEL_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim")
-# MuJoCo Warp's own default sizes for models without height fields or flexes (mujoco_warp io.py)
-WARP_BUFFERS = {"contacts_per_env": 48, "constraints_per_env": 64}
-MJX_TUNING = (*MODEL_TUNING, *WARP_BUFFERS, "impl")
-
-
-def model_bytes(model: mujoco.MjModel) -> bytes:
-    """The compiled model as MuJoCo saves it (MJB): equal bytes, equal model, for cache keys."""
-    out = np.empty(mujoco.mj_sizeModel(model), np.uint8)
-    mujoco.mj_saveModel(model, None, out)
-    return out.tobytes()
 
 
 @dataclasses.dataclass
@@ -46,8 +30,6 @@ class TaskConfig:
     real_params: dict[str, float]
     control_dt: float
     episode_length: int
-    # sim=mjx only (docs/tasks.md): solver settings and contact caps that make the model fast on MJX
-    mjx_tuning: dict[str, Any]
 
     def validate(self) -> None:
         if not self.parameters:
@@ -60,15 +42,6 @@ class TaskConfig:
             if not low <= value <= high:
                 given = "" if name in self.real_params else " (its nominal value, as no real_params entry gives one)"
                 raise ConfigError(f"real_params.{name}={value}{given} lies outside its range [{low}, {high}]")
-        unknown = set(self.mjx_tuning) - set(MJX_TUNING)
-        if unknown:
-            raise ConfigError(f"mjx_tuning: unknown keys {sorted(unknown)}; allowed: {', '.join(MJX_TUNING)}")
-        if self.mjx_tuning.get("impl", "jax") != "jax":
-            raise ConfigError(f"mjx_tuning.impl={self.mjx_tuning['impl']!r}: only 'jax' can be preferred (sim.impl=auto "
-                              "takes MuJoCo Warp wherever it runs otherwise)")
-        small = [k for k in WARP_BUFFERS if k in self.mjx_tuning and int(self.mjx_tuning[k]) < 1]
-        if small:
-            raise ConfigError(f"mjx_tuning: {', '.join(small)} must be >= 1")
         if self.control_dt <= 0 or self.episode_length < 1:
             raise ConfigError("control_dt must be > 0 and episode_length >= 1")
 
@@ -116,38 +89,6 @@ class Task:
     def model_path(self) -> Path:
         """The MJCF file: `xml` under tasks/assets for the built-in tasks."""
         return ASSETS / self.xml
-
-    @functools.cached_property
-    def mjx_model(self) -> mujoco.MjModel:
-        """The model sim=mjx simulates with MJX's JAX implementation: `model` with the task's `mjx_tuning`."""
-        return self._tuned(self.cfg.mjx_tuning)
-
-    @functools.cached_property
-    def warp_model(self) -> mujoco.MjModel:
-        """The model sim=mjx simulates with MuJoCo Warp: the same tuning less `min_condim` (Warp has
-        frictionless contacts with elliptic cones)."""
-        return self._tuned({k: v for k, v in self.cfg.mjx_tuning.items() if k != "min_condim"})
-
-    def tuned_model(self, impl: str) -> mujoco.MjModel:
-        """The model MJX simulates with implementation `impl` (jax or warp)."""
-        return self.warp_model if impl == "warp" else self.mjx_model
-
-    def warp_buffer(self, key: str) -> int:
-        return int(self.cfg.mjx_tuning.get(key, WARP_BUFFERS[key]))
-
-    def _tuned(self, tuning: dict[str, Any]) -> mujoco.MjModel:
-        if not set(tuning) & set(MODEL_TUNING):
-            return self.model
-        spec = mujoco.MjSpec.from_file(str(self.model_path))
-        for key in ("iterations", "ls_iterations"):
-            if key in tuning:
-                setattr(spec.option, key, int(tuning[key]))
-        for geom in spec.geoms if "min_condim" in tuning else ():
-            geom.condim = max(geom.condim, int(tuning["min_condim"]))
-        for key in ("max_contact_points", "max_geom_pairs"):
-            if key in tuning:
-                spec.add_numeric(name=key, data=[float(tuning[key])])
-        return spec.compile()
 
     @property
     def obs_dim(self) -> int:

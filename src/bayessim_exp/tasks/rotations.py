@@ -1,5 +1,5 @@
 """Quaternion helpers for task observations, batched and written against an array namespace `xp`
-(numpy on CPU, jax.numpy under MJX).
+(numpy on CPU, jax.numpy on the GPU backend).
 
 Quaternions are MuJoCo's (w, x, y, z), shape [..., 4]; vectors are [..., 3].
 """

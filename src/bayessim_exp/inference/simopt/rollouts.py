@@ -15,6 +15,7 @@ import logging
 import numpy as np
 import torch
 
+from ...errors import ConfigError
 from ...policies import OpenLoopPolicy
 from ...sim.pool import SimulatorPool
 from ...sim.trajectories import Trajectories
@@ -34,14 +35,10 @@ def simulate_like_real(sims: SimulatorPool, params: torch.Tensor, real: Trajecto
         log.warning("task %s cannot restart from an observed state; SimOpt simulations start from its reset "
                     "distribution instead", task.name)
     state = None if start is None else {f: np.tile(v, (n,) + (1,) * (v.ndim - 1)) for f, v in start.items()}
-    actions = real.actions.repeat(n, 1, 1)
-    seeds = np.random.SeedSequence(seed).generate_state(-(-len(rows) // sims.chunk))
-    parts = []
-    for k, lo in enumerate(range(0, len(rows), sims.chunk)):
-        block = slice(lo, lo + sims.chunk)
-        acting = OpenLoopPolicy(actions[block]) if rollout == "recorded" else policy
-        part_state = None if state is None else {f: v[block] for f, v in state.items()}
-        traj = sims.get(len(rows[block])).rollout(rows[block], acting, real.horizon, int(seeds[k]), state=part_state)
-        obs = traj.states.double().cpu()
-        parts.append(torch.where(traj.diverged.cpu()[:, None, None], torch.nan, obs))
-    return torch.cat(parts).reshape(n, m, real.horizon + 1, -1)
+    acting = OpenLoopPolicy(real.actions.repeat(n, 1, 1)) if rollout == "recorded" else policy
+    if hasattr(acting, "plan"):  # the pool would start each row from a recorded trajectory's state, not the real start's
+        raise ConfigError("SimOpt's closed_loop rollout runs the round's policy step by step; policy=replay "
+                          "replays recorded trajectories: use method.rollout=recorded")
+    traj = sims.rollout(rows, acting, real.horizon, seed, state=state)  # the pool's chunks, padded where MJX compiles
+    obs = torch.where(traj.diverged.cpu()[:, None, None], torch.nan, traj.states.double().cpu())
+    return obs.reshape(n, m, real.horizon + 1, -1)

@@ -148,8 +148,8 @@ class ParamSpec:
         return values
 
     def field_values(self, model: Any, values: Any, xp: Any = np) -> dict[str, Any]:
-        """Per-environment values [N, ...] of every field the parameters touch. With xp=jax.numpy and an
-        mjx.Model, the same operations run traceably (under jit) in the model leaves' dtypes."""
+        """Per-environment values [N, ...] of every field the parameters touch. With xp=jax.numpy and a
+        JAX model (the GPU backend's), the same operations run traceably (under jit) in the model leaves' dtypes."""
         values = self.check_values(values) if xp is np else values
         n = values.shape[0]
         out = {f: xp.repeat(_nominal(model, f, xp)[None], n, axis=0) for f in self.fields}
@@ -189,12 +189,12 @@ def _is_model_field(model: mujoco.MjModel, field: str) -> bool:
 
 
 def model_field(model: Any, field: str) -> Any:
-    """A field of an MjModel or mjx.Model by its spec name ('opt.<name>' for the MjOption fields)."""
+    """A field of an MjModel or a JAX model (the GPU backend's) by its spec name ('opt.<name>' for the MjOption fields)."""
     return getattr(model.opt, field[4:]) if field.startswith("opt.") else getattr(model, field)
 
 
 def _nominal(model: Any, field: str, xp: Any = np) -> Any:
-    if xp is not np:  # an mjx.Model: its leaves, in their dtypes
+    if xp is not np:  # a JAX model: its leaves, in their dtypes
         return xp.atleast_1d(model_field(model, field))
     return np.atleast_1d(np.array(model_field(model, field), dtype=np.float64))
 

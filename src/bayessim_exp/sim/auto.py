@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 
-from ..registry import register
 from .mjx import MjxConfig, mjx_backend
 from .mjx_setup import gpu_visible
 from .native import NativeConfig, native_backend
@@ -12,7 +11,6 @@ from .native import NativeConfig, native_backend
 log = logging.getLogger(__name__)
 
 
-@register("sim", "auto", MjxConfig)
 def auto_backend(cfg: MjxConfig):
     """The same settings as sim=mjx; on native MuJoCo nthread is the simulation threads."""
     if gpu_visible():

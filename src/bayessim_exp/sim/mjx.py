@@ -33,7 +33,6 @@ import torch
 from mujoco import batch as mjbatch
 
 from ..errors import ConfigError
-from ..registry import register
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec, model_field
 from .base import Policy, Simulator, broke_down
@@ -334,7 +333,6 @@ def _where(jnp: Any, mask: Any, a: Any, b: Any) -> Any:
     return jax.tree_util.tree_map(lambda x, y: jnp.where(mask.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), a, b)
 
 
-@register("sim", "mjx", MjxConfig)
 def mjx_backend(cfg: MjxConfig):
     """The sim group builds a factory: (task, num_envs) -> simulator. A small batch (the real stage's few
     trajectories, the model checks' replays) takes less time on CPU threads than compiling MJX for its

@@ -11,7 +11,6 @@ import torch
 from mujoco import batch as mjbatch
 
 from ..errors import ConfigError
-from ..registry import register
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec
 from .base import Simulator, broke_down
@@ -103,7 +102,6 @@ class NativeSimulator(Simulator):
         return self.batch.warning[:, _DIVERGENCE_WARNINGS, 1].sum(1)
 
 
-@register("sim", "native", NativeConfig)
 def native_backend(cfg: NativeConfig):
     """The sim group builds a factory: (task, num_envs) -> simulator."""
     return lambda task, num_envs: NativeSimulator(task, num_envs, cfg)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..registry import register
 from .locomotion import Locomotion, LocomotionConfig
 
 
@@ -13,7 +12,6 @@ class AntConfig(LocomotionConfig):
     pass
 
 
-@register("task", "Ant", AntConfig)
 class Ant(Locomotion):
     name = "Ant"
     xml = "ant/ant.xml"

@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import register
 from .base import Task, TaskConfig
 from .rotations import quat_rotate_inverse
 
@@ -37,7 +36,6 @@ class AnymalConfig(TaskConfig):
     min_base_height: float  # [m]
 
 
-@register("task", "Anymal", AnymalConfig)
 class Anymal(Task):
     name = "Anymal"
     xml = "anymal/anymal.xml"

@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import register
 from .base import Task, TaskConfig
 
 
@@ -27,7 +26,6 @@ class BallBalanceConfig(TaskConfig):
     reset_max_speed: float  # horizontal speed towards the centre, up to this at offset d [m/s]
 
 
-@register("task", "BallBalance", BallBalanceConfig)
 class BallBalance(Task):
     name = "BallBalance"
     xml = "ball_balance/ball_balance.xml"

@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import register
 from .base import Task, TaskConfig
 
 
@@ -23,7 +22,6 @@ class CartpoleConfig(TaskConfig):
     reset_vel: float  # initial velocities ~ U(-v, v)
 
 
-@register("task", "Cartpole", CartpoleConfig)
 class Cartpole(Task):
     name = "Cartpole"
     xml = "cartpole/cartpole.xml"

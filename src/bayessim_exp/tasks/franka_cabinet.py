@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import register
 from .base import Task, TaskConfig
 
 
@@ -33,7 +32,6 @@ class FrankaCabinetConfig(TaskConfig):
     open_distance: float  # [m] drawer opening that ends the episode
 
 
-@register("task", "FrankaCabinet", FrankaCabinetConfig)
 class FrankaCabinet(Task):
     name = "FrankaCabinet"
     xml = "franka_cabinet/franka_cabinet.xml"

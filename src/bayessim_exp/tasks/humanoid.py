@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..registry import register
 from .locomotion import Locomotion, LocomotionConfig
 
 
@@ -20,7 +19,6 @@ class HumanoidConfig(LocomotionConfig):
     angvel_scale: float
 
 
-@register("task", "Humanoid", HumanoidConfig)
 class Humanoid(Locomotion):
     name = "Humanoid"
     xml = "humanoid/humanoid.xml"

@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import register
 from .aerial import Aerial, AerialConfig
 
 
@@ -27,7 +26,6 @@ class IngenuityConfig(AerialConfig):
     target_high: list[float]
 
 
-@register("task", "Ingenuity", IngenuityConfig)
 class Ingenuity(Aerial):
     name = "Ingenuity"
     xml = "ingenuity/ingenuity.xml"

@@ -27,7 +27,6 @@ import mujoco
 import numpy as np
 
 from ..errors import ConfigError
-from ..registry import register
 from .base import Task, TaskConfig
 
 PACKAGE_SCHEME = "pkg://"
@@ -157,7 +156,6 @@ def _observation_layout(m: mujoco.MjModel, cfg: MjcfConfig) -> tuple[list[str], 
     return names, tuple(np.array(c, int) for c in (qpos_cols, qvel_cols, sensor_cols))
 
 
-@register("task", "mjcf", MjcfConfig)
 class MjcfTask(Task):
     name = "mjcf"
 

@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import register
 from .base import Task, TaskConfig
 
 
@@ -16,7 +15,6 @@ class PendulumConfig(TaskConfig):
     max_speed_reset: float  # initial angular speed ~ U(-v, v)
 
 
-@register("task", "Pendulum", PendulumConfig)
 class Pendulum(Task):
     name = "Pendulum"
     xml = "pendulum.xml"

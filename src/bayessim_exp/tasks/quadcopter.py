@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from ..registry import register
 from .aerial import Aerial, AerialConfig
 
 
@@ -19,7 +18,6 @@ class QuadcopterConfig(AerialConfig):
     target_pos: list[float]  # [m]
 
 
-@register("task", "Quadcopter", QuadcopterConfig)
 class Quadcopter(Aerial):
     name = "Quadcopter"
     xml = "quadcopter/quadcopter.xml"

@@ -18,7 +18,6 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from ..registry import register
 from .base import Task, TaskConfig
 from .rotations import quat_angle, quat_conj, quat_from_angle_axis, quat_mul, quat_rotate
 
@@ -40,7 +39,6 @@ class ShadowHandConfig(TaskConfig):
     vel_obs_scale: float
 
 
-@register("task", "ShadowHand", ShadowHandConfig)
 class ShadowHand(Task):
     name = "ShadowHand"
     xml = "shadow_hand/shadow_hand.xml"
@@ -107,7 +105,6 @@ class ShadowHand(Task):
         return self._goal_dist(obs, xp) >= self.cfg.fall_distance
 
 
-@register("task", "ShadowHand_more", ShadowHandConfig)
 class ShadowHandMore(ShadowHand):
     name = "ShadowHand_more"
 

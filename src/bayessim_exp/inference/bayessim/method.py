@@ -35,7 +35,6 @@ from ...distributions.truncated_prior import TruncatedPrior
 from ...errors import ConfigError, PosteriorError
 from ...models.base import column_scale
 from ...policies import OpenLoopPolicy, RandomPolicy
-from ...registry import register
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, real_trajectories
@@ -516,6 +515,5 @@ def _probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransfo
         raise ConfigError(f"method.parameter_space=probit: {exc}; set method.parameter_space=box (or auto)") from None
 
 
-@register("method", "bayessim", BayesSimConfig)
 def bayessim(cfg: BayesSimConfig, comp) -> BayesSim:
     return BayesSim(cfg, comp)

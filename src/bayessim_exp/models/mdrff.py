@@ -18,6 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..data_files import data_class
 from ..errors import ConfigError
 from ..registry import register
 from .base import Standardizer, TrainConfig
@@ -28,6 +29,7 @@ from .spread import SpreadScale
 KERNELS = {"rbf": None, "matern12": 1.0, "matern32": 3.0, "matern52": 5.0}
 
 
+@data_class
 @dataclasses.dataclass
 class MdrffConfig(TrainConfig):
     features: int  # random Fourier features (cos and sin of features / 2 frequencies)
@@ -84,6 +86,7 @@ class RandomFourierFeatures(nn.Module):
         return torch.cat([torch.cos(proj), torch.sin(proj)], -1) / math.sqrt(self.frequencies.shape[0])
 
 
+@data_class
 class MDRFF(MDNN):
     """MDNN's training, conditioning and state handling around a random-Fourier-feature body."""
 

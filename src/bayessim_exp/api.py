@@ -60,8 +60,8 @@ class FittedPosterior:
     def load(cls, path: str | Path, trusted: bool = False) -> FittedPosterior:
         """trusted=True also reads a file in the old pickle format, running any code it holds;
         `FittedPosterior.load(path, trusted=True).save(path)` converts it."""
-        d = load_state(path, trusted, convert_hint=f"api.FittedPosterior.load({str(path)!r}, trusted=True)"
-                                                   f".save({str(path)!r})")
+        d = load_state(path, trusted, convert_hint=f"bayessim_exp.api.FittedPosterior.load({str(path)!r}, "
+                                                   f"trusted=True).save({str(path)!r})")
         if isinstance(d, dict) and "state" in d:  # the old format (trusted=True): the model's state dict
             model = registry.build("model", {**d["config"], "name": d["name"]},
                                    theta_dim=d["theta_dim"], x_dim=d["x_dim"])

@@ -52,7 +52,8 @@ class RunDir:
 
     def load(self, round_index: int, stage: str, trusted: bool = False) -> Any:
         return load_state(self.stage_file(round_index, stage), trusted,
-                          convert_hint=f"api.load_run({str(self.path)!r}, trusted=True) rewrites the run's artifacts")
+                          convert_hint=f"bayessim_exp.api.load_run({str(self.path)!r}, trusted=True) rewrites "
+                                       "the run's artifacts")
 
     def convert(self) -> None:
         """Rewrite every artifact as a data file; those in the old pickle format are unpickled (running any

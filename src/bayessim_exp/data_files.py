@@ -84,14 +84,14 @@ def load_state(path: str | Path, trusted: bool = False, convert_hint: str = "") 
     hint = convert_hint or "load it with trusted=True and save it again"
     allowed_classes()
     try:
-        raw = torch.load(path, weights_only=True, map_location="cpu")
+        raw = torch.load(path, weights_only=True)
     except pickle.UnpicklingError as exc:
         if not trusted:
             raise DataFileError(
                 f"{path} holds pickled Python objects, not data: loading it could run any code it contains, so it "
                 f"is refused. If it is a file bayessim_exp wrote before the data format and you trust its source, "
                 f"convert it once: {hint}") from exc
-        return torch.load(path, weights_only=False, map_location="cpu")
+        return torch.load(path, weights_only=False)
     if not isinstance(raw, dict) or raw.get("format") != FORMAT:
         if trusted:
             return raw  # an old file that held only tensors and containers
@@ -104,7 +104,8 @@ def load_state(path: str | Path, trusted: bool = False, convert_hint: str = "") 
         return _decode(description["value"], tensors)
     except DataFileError as exc:
         raise DataFileError(f"{path}: {exc}") from None
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    # RuntimeError: a model's state dict whose shapes differ from the ones its config builds
+    except (KeyError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
         raise DataFileError(f"{path}: the description does not match the data ({type(exc).__name__}: {exc}); "
                             "the file is damaged or was altered") from exc
 

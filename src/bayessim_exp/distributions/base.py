@@ -72,8 +72,8 @@ class ParameterDistribution:
     @staticmethod
     def load(path: str | Path, trusted: bool = False) -> ParameterDistribution:
         """trusted=True also reads a file in the old pickle format, running any code it holds."""
-        dist = load_state(path, trusted, convert_hint=f"ParameterDistribution.load({str(path)!r}, trusted=True)"
-                                                      f".save({str(path)!r})")
+        name = "bayessim_exp.distributions.base.ParameterDistribution"
+        dist = load_state(path, trusted, convert_hint=f"{name}.load({str(path)!r}, trusted=True).save({str(path)!r})")
         if not isinstance(dist, ParameterDistribution):
             raise DataFileError(f"{path} holds a {type(dist).__name__}, not a ParameterDistribution")
         return dist

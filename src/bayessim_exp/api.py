@@ -20,9 +20,12 @@ import torch
 from omegaconf import OmegaConf
 
 from . import registry
+from .artifacts import RunDir
+from .data_files import data_class, load_state, save_state
 from .distributions.base import ParameterDistribution
 from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from .distributions.probit import ProbitTransform
+from .errors import DataFileError
 from .inference.bayessim.condition import condition
 
 __all__ = ["BoxUniform", "GaussianPrior", "LogUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
@@ -30,6 +33,7 @@ __all__ = ["BoxUniform", "GaussianPrior", "LogUniform", "FittedPosterior", "fit_
 CONF_DIR = registry.CONF_DIR
 
 
+@data_class
 @dataclasses.dataclass
 class FittedPosterior:
     name: str
@@ -49,18 +53,24 @@ class FittedPosterior:
                          combination=combination)[0]
 
     def save(self, path: str | Path) -> None:
-        torch.save({"name": self.name, "config": self.config, "state": self.model.state_dict(),
-                    "theta_dim": self.model.theta_dim, "x_dim": self.model.x_dim, "history": self.history,
-                    "prior": self.prior, "probit": self.probit is not None}, path)  # priors are small torch distributions: pickled whole
+        """A data file (data_files.py): tensors and a JSON description, nothing that runs when loaded."""
+        save_state(self, path)
 
     @classmethod
-    def load(cls, path: str | Path) -> FittedPosterior:
-        d = torch.load(path, weights_only=False)
-        model = registry.build("model", {**d["config"], "name": d["name"]},
-                               theta_dim=d["theta_dim"], x_dim=d["x_dim"])
-        model.load_state_dict(d["state"])
-        probit = ProbitTransform(d["prior"]) if d.get("probit") else None
-        return cls(d["name"], model, d["prior"], d["config"], d["history"], probit=probit)
+    def load(cls, path: str | Path, trusted: bool = False) -> FittedPosterior:
+        """trusted=True also reads a file in the old pickle format, running any code it holds;
+        `FittedPosterior.load(path, trusted=True).save(path)` converts it."""
+        d = load_state(path, trusted, convert_hint=f"bayessim_exp.api.FittedPosterior.load({str(path)!r}, "
+                                                   f"trusted=True).save({str(path)!r})")
+        if isinstance(d, dict) and "state" in d:  # the old format (trusted=True): the model's state dict
+            model = registry.build("model", {**d["config"], "name": d["name"]},
+                                   theta_dim=d["theta_dim"], x_dim=d["x_dim"])
+            model.load_state_dict(d["state"])
+            probit = ProbitTransform(d["prior"]) if d.get("probit") else None
+            d = cls(d["name"], model, d["prior"], d["config"], d["history"], probit=probit)
+        if not isinstance(d, FittedPosterior):
+            raise DataFileError(f"{path} holds a {type(d).__name__}, not a FittedPosterior")
+        return d
 
 
 def _parameter_distribution(dist, what: str = "prior") -> ParameterDistribution | None:
@@ -136,7 +146,11 @@ class Run:
         return pipeline.comp.method.posterior(RoundContext(pipeline.comp, pipeline.run_dir, r, pipeline.rc.seed, None))
 
 
-def load_run(path: str | Path) -> Run:
+def load_run(path: str | Path, trusted: bool = False) -> Run:
+    """The run in `path`; its artifacts are read as data files (data_files.py) when a posterior is asked for.
+    trusted=True first rewrites artifacts in the old pickle format as data files, running any code they hold."""
     path = Path(path)
+    if trusted:
+        RunDir(path).convert()
     results = json.loads((path / "results.json").read_text())
     return Run(path, results, OmegaConf.load(path / "config.yaml"))

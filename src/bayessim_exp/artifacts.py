@@ -2,7 +2,7 @@
 
     <run dir>/config.yaml           the composed config (a resumed run must match it)
     <run dir>/results.json          what sweeps and reports read (see DESIGN.md)
-    <run dir>/round_001/<stage>.pt  one artifact per finished stage
+    <run dir>/round_001/<stage>.pt  one artifact per finished stage, a data file (data_files.py)
     <run dir>/events.out.tfevents.* TensorBoard
 """
 
@@ -15,9 +15,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import torch
 from omegaconf import DictConfig, OmegaConf
 
+from .data_files import dumps, load_state
 from .errors import ConfigError
 
 
@@ -47,10 +47,20 @@ class RunDir:
         return self.stage_file(round_index, stage).is_file()
 
     def save(self, round_index: int, stage: str, obj: Any) -> None:
-        _atomic_write(self.stage_file(round_index, stage), lambda f: torch.save(obj, f))
+        data = dumps(obj)
+        _atomic_write(self.stage_file(round_index, stage), lambda f: f.write(data))
 
-    def load(self, round_index: int, stage: str) -> Any:
-        return torch.load(self.stage_file(round_index, stage), weights_only=False)
+    def load(self, round_index: int, stage: str, trusted: bool = False) -> Any:
+        return load_state(self.stage_file(round_index, stage), trusted,
+                          convert_hint=f"bayessim_exp.api.load_run({str(self.path)!r}, trusted=True) rewrites "
+                                       "the run's artifacts")
+
+    def convert(self) -> None:
+        """Rewrite every artifact as a data file; those in the old pickle format are unpickled (running any
+        code they hold), so only for run dirs from a trusted source."""
+        for path in sorted(self.path.glob("round_*/*.pt")):
+            round_index, stage = int(path.parent.name.removeprefix("round_")), path.stem
+            self.save(round_index, stage, self.load(round_index, stage, trusted=True))
 
     def write_json(self, name: str, obj: Any) -> None:
         """Strict JSON: NaN and infinities (e.g. the log density of a point outside the support) become null."""

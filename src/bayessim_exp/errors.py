@@ -15,3 +15,7 @@ class TrainingError(RuntimeError):
 
 class PosteriorError(RuntimeError):
     """The posterior cannot be formed or sampled (e.g. no mass inside the prior's support)."""
+
+
+class DataFileError(ValueError):
+    """A saved posterior, model or run artifact that is not plain data of an allowed class (or is damaged)."""

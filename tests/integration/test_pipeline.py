@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from bayessim_exp import api, registry
+from bayessim_exp.artifacts import RunDir
 from bayessim_exp.inference.bayessim.method import BayesSim
 from bayessim_exp.pipeline import Pipeline
 from bayessim_exp.policies import RandomPolicy
@@ -148,8 +149,8 @@ def test_later_rounds_draw_from_the_previous_posterior_in_probit_space_and_resum
     Pipeline(cfg, tmp_path).run(stop_after=(2, "fit"))
     results = Pipeline(cfg, tmp_path).run()
     assert [r["proposal"] for r in results["rounds"]] == ["prior", proposal]
-    theta_1 = torch.load(tmp_path / "round_001" / "summarize.pt")["theta"]
-    theta_2 = torch.load(tmp_path / "round_002" / "summarize.pt")["theta"]
+    theta_1 = RunDir(tmp_path).load(1, "summarize")["theta"]
+    theta_2 = RunDir(tmp_path).load(2, "summarize")["theta"]
     # drawn from a posterior: narrower than the prior in the length, which one 20-step trajectory pins down
     # (not in the mass, which it barely does: round 1's posterior is about as wide as the prior there)
     assert theta_2.std(0)[1] < theta_1.std(0)[1] / 2 and theta_2.std(0)[0] < 1.25 * theta_1.std(0)[0]
@@ -227,8 +228,8 @@ def test_a_round_the_guard_fails_hands_on_the_last_one_that_passed(compose, tmp_
     assert [g["handed_on"] for g in guards] == ["round 1's posterior", "round 1's posterior", "round 3's posterior"]
     assert results["rounds"][1]["posterior_mean"] == results["rounds"][0]["posterior_mean"]
     run = api.load_run(tmp_path)
-    theta = torch.load(tmp_path / "round_003" / "summarize.pt")["theta"].double()
-    round_1, round_2 = (torch.load(tmp_path / f"round_00{r}" / "condition.pt", weights_only=False)["posterior"]
+    theta = RunDir(tmp_path).load(3, "summarize")["theta"].double()
+    round_1, round_2 = (RunDir(tmp_path).load(r, "condition")["posterior"]
                         for r in (1, 2))
     torch.testing.assert_close(run.posterior(2).log_prob(theta), round_1.log_prob(theta))
     # round 3 drew from round 1's 99.9 % region, not round 2's

@@ -2,8 +2,8 @@
 (no action noise), the training pairs with the noise."""
 
 import pytest
-import torch
 
+from bayessim_exp.artifacts import RunDir
 from bayessim_exp.pipeline import Pipeline
 
 pytestmark = pytest.mark.slow
@@ -12,12 +12,12 @@ pytestmark = pytest.mark.slow
 def test_the_calibration_and_held_out_pairs_replay_the_real_actions_exactly(compose, tmp_path):
     cfg = compose(["task=Pendulum", "policy=replay", "debug=smoke", "collect.keep_trajectories=true", "rounds=1"])
     Pipeline(cfg, tmp_path).run()
-    collected = torch.load(tmp_path / "round_001" / "collect.pt", weights_only=False)
-    real = torch.load(tmp_path / "round_001" / "real.pt", weights_only=False)["traj"]["actions"]
+    collected = RunDir(tmp_path).load(1, "collect")
+    real = RunDir(tmp_path).load(1, "real")["traj"]["actions"]
     n, held_out = cfg.collect.trajectories, int(cfg.diagnostics.held_out_fraction * cfg.collect.trajectories)
     assert collected["exact"].tolist() == [False] * (n - 2 * held_out) + [True] * (2 * held_out)
     actions = collected["traj"]["actions"]
     replays_real = (actions[:, None] == real[None]).all(-1).all(-1).any(1)  # some real trajectory's actions, exactly
     assert replays_real.tolist() == collected["exact"].tolist()
-    fitted = torch.load(tmp_path / "round_001" / "fit.pt", weights_only=False)
+    fitted = RunDir(tmp_path).load(1, "fit")
     assert fitted["held_out"]["count"] == held_out  # the last rows: exact replays

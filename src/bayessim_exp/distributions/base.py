@@ -9,7 +9,7 @@ never switch on the concrete class:
     mean, stddev          float64 [D]; Monte Carlo with a fixed seed unless a subclass knows them exactly
     superlevel_box(level) a box around {log_prob >= level}, or None (truncated proposals sample within it)
     effective_sample_size the draws an importance-sampling estimate rests on; None where exact
-    save(path), load(path)
+    save(path), load(path)        a data file (data_files.py), never a pickle
 """
 
 from __future__ import annotations
@@ -19,6 +19,9 @@ import functools
 from pathlib import Path
 
 import torch
+
+from ..data_files import load_state, save_state
+from ..errors import DataFileError
 
 # draws behind Monte Carlo moments: the standard error of the mean is stddev / 140
 _MOMENT_DRAWS = 20_000
@@ -64,13 +67,15 @@ class ParameterDistribution:
         return self._moments[1]
 
     def save(self, path: str | Path) -> None:
-        torch.save(self, path)
+        save_state(self, path)
 
     @staticmethod
-    def load(path: str | Path) -> ParameterDistribution:
-        dist = torch.load(path, weights_only=False)
+    def load(path: str | Path, trusted: bool = False) -> ParameterDistribution:
+        """trusted=True also reads a file in the old pickle format, running any code it holds."""
+        name = "bayessim_exp.distributions.base.ParameterDistribution"
+        dist = load_state(path, trusted, convert_hint=f"{name}.load({str(path)!r}, trusted=True).save({str(path)!r})")
         if not isinstance(dist, ParameterDistribution):
-            raise TypeError(f"{path} holds a {type(dist).__name__}, not a ParameterDistribution")
+            raise DataFileError(f"{path} holds a {type(dist).__name__}, not a ParameterDistribution")
         return dist
 
 

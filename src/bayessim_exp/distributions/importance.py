@@ -13,6 +13,7 @@ from collections.abc import Callable
 
 import torch
 
+from ..data_files import data_class
 from .base import ParameterDistribution
 
 
@@ -22,6 +23,7 @@ def _draw(dist, num: int, seed: int) -> torch.Tensor:
         return dist.sample((num,)).double()
 
 
+@data_class
 class ImportancePosterior(ParameterDistribution):
     """exp(log_target(theta)) / Z with Z estimated from `num` draws of `base`.
 
@@ -68,6 +70,7 @@ class ImportancePosterior(ParameterDistribution):
         return (self._weights[:, None] * (self._pool - self.mean) ** 2).sum(0).sqrt()
 
 
+@data_class
 class DefensiveMixture(ParameterDistribution):
     """An equal-weight mixture of arbitrary distributions: an importance base whose tails cover each part's."""
 

@@ -12,6 +12,7 @@ import math
 import torch
 from torch.special import ndtr, ndtri
 
+from ..data_files import data_class
 from .base import ParameterDistribution
 from .box import restrict_log_prob
 
@@ -20,6 +21,7 @@ def _uniform(shape: tuple[int, ...], dim: int, generator: torch.Generator | None
     return torch.rand(*shape, dim, dtype=torch.float64, generator=generator)
 
 
+@data_class
 class BoxUniform(ParameterDistribution):
     """Uniform over [low, high]^D."""
 
@@ -47,6 +49,7 @@ class BoxUniform(ParameterDistribution):
         return (self.high - self.low) / math.sqrt(12.0)
 
 
+@data_class
 class LogUniform(ParameterDistribution):
     """log(theta) uniform over [log low, log high] per parameter (scale parameters: masses, gains)."""
 
@@ -77,6 +80,7 @@ class LogUniform(ParameterDistribution):
         return restrict_log_prob(lp, theta, self.low, self.high)
 
 
+@data_class
 class GaussianPrior(ParameterDistribution):
     """Independent Gaussians N(loc, scale^2), optionally truncated to the box [low, high].
 

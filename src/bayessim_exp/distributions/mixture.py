@@ -11,6 +11,7 @@ import math
 
 import torch
 
+from ..data_files import data_class
 from .base import ParameterDistribution
 from .box import inside, restrict_log_prob
 from .ghk import ghk
@@ -80,6 +81,7 @@ class MixtureBatch:
         return out
 
 
+@data_class
 class GaussianMixture(ParameterDistribution):
     """sum_k w_k N(mean_k, cov_k) over R^D, float64."""
 
@@ -199,6 +201,7 @@ class GaussianMixture(ParameterDistribution):
         return GaussianMixture(self.log_weights[keep], self.means[keep], self.covs[keep])
 
 
+@data_class
 class TruncatedMixture(ParameterDistribution):
     """A mixture restricted to the box [low, high] and renormalised.
 

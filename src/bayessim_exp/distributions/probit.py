@@ -21,6 +21,7 @@ from collections.abc import Callable
 import torch
 from torch.special import ndtr, ndtri
 
+from ..data_files import data_class
 from .base import ParameterDistribution
 from .box import restrict_log_prob
 from .independent import BoxUniform, GaussianPrior, LogUniform
@@ -35,6 +36,7 @@ def _std_normal_log_pdf(u: torch.Tensor) -> torch.Tensor:
     return -0.5 * u**2 - _LOG_SQRT_2PI
 
 
+@data_class
 class ProbitTransform:
     """theta (in the prior's box) <-> u in R^D with u ~ N(0, I) under the prior."""
 
@@ -111,6 +113,7 @@ def standard_normal_prior(dim: int) -> GaussianPrior:
     return GaussianPrior(torch.zeros(dim, dtype=torch.float64), torch.ones(dim, dtype=torch.float64))
 
 
+@data_class
 class ProbitPosterior(ParameterDistribution):
     """A distribution over u mapped back to parameter units: exact density and sampling on the box."""
 

@@ -6,11 +6,13 @@ import math
 
 import torch
 
+from ..data_files import data_class
 from .base import ParameterDistribution, seeded_by
 from .box import inside, restrict_log_prob
 from .rejection import sample_by_rejection
 
 
+@data_class
 class Restricted(ParameterDistribution):
     """dist restricted to [low, high]; the mass inside is a Monte Carlo estimate from `num_mc` draws,
     sampling is exact by rejection."""

@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 import torch
 
+from ..data_files import data_class
 from .base import ParameterDistribution
 from .probit import ProbitTransform
 from .rejection import sample_by_rejection
@@ -25,6 +26,7 @@ from .rejection import sample_by_rejection
 _BOX_MARGIN = 1e-9
 
 
+@data_class
 class TruncatedPrior(ParameterDistribution):
     """prior(theta) * 1[posterior.log_prob(theta) >= threshold] / mass.
 
@@ -50,6 +52,16 @@ class TruncatedPrior(ParameterDistribution):
             raise ValueError(f"the previous posterior's {hpd_mass:.1%} region holds {self.acceptance:.2g} of the "
                              f"candidates' mass (< {min_accept:g}): too little to sample by rejection")
         self.mass = box_mass * self.acceptance
+
+    def to_state(self) -> dict:  # the candidates' sampler is a closure: rebuilt from the rest
+        return {k: v for k, v in vars(self).items() if k != "_candidates"}
+
+    @classmethod
+    def from_state(cls, fields: dict) -> TruncatedPrior:
+        obj = cls.__new__(cls)
+        obj.__dict__.update(fields)
+        obj._candidates = _candidates(obj.prior, obj.posterior, obj.threshold)[1]
+        return obj
 
     def _in_region(self, theta: torch.Tensor) -> torch.Tensor:
         return self.posterior.log_prob(theta) >= self.threshold

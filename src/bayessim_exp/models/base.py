@@ -91,7 +91,26 @@ class Standardizer(torch.nn.Module):
         return (data - self.shift) / self.scale
 
 
-class StandardizedDensityModel:
+class SavedAsData:
+    """A fitted model in a data file (data_files.py): its config, sizes and state dict; rebuilt by its
+    constructor, so a model whose network the config does not describe (an `embedding` module given to the
+    constructor is code, not data) cannot be saved."""
+
+    def to_state(self) -> dict:
+        built = type(self)(self.cfg, self.theta_dim, self.x_dim)
+        if repr(getattr(built, "net", None)) != repr(getattr(self, "net", None)):
+            raise TypeError(f"this {type(self).__name__}'s network is not the one its config builds (an embedding "
+                            "module?): it cannot be saved as data")
+        return {"cfg": self.cfg, "theta_dim": self.theta_dim, "x_dim": self.x_dim, "state": self.state_dict()}
+
+    @classmethod
+    def from_state(cls, fields: dict):
+        model = cls(fields["cfg"], fields["theta_dim"], fields["x_dim"])
+        model.load_state_dict(fields["state"])
+        return model
+
+
+class StandardizedDensityModel(SavedAsData):
     """Fitting and state shared by models with standardised inputs and targets.
 
     Subclasses build `self.net` (a module holding every trainable part and the standardisers

@@ -17,6 +17,7 @@ import torch
 import zuko
 from torch import nn
 
+from ..data_files import data_class
 from ..distributions.base import ParameterDistribution, seeded_by
 from ..errors import ConfigError
 from ..registry import register
@@ -24,6 +25,7 @@ from .base import StandardizedDensityModel, Standardizer, TrainConfig
 from .mdnn import input_projection
 
 
+@data_class
 @dataclasses.dataclass
 class FlowConfig(TrainConfig):
     transforms: int  # autoregressive spline layers
@@ -45,12 +47,33 @@ def _chunks(n: int, size: int) -> list[int]:
     return [min(size, n - start) for start in range(0, n, size)]
 
 
-class FlowConditional(ParameterDistribution):
-    """q(theta | x_obs) in parameter units: the flow on standardised theta, mapped back."""
+def _nsf(cfg: FlowConfig, theta_dim: int, context: int) -> zuko.flows.NSF:
+    return zuko.flows.NSF(theta_dim, context, bins=cfg.bins, transforms=cfg.transforms, hidden_features=list(cfg.hidden))
 
-    def __init__(self, dist, shift: torch.Tensor, scale: torch.Tensor):
-        self.dist, self.shift, self.scale = dist, shift.double(), scale.double()
+
+@data_class
+class FlowConditional(ParameterDistribution):
+    """q(theta | x_obs) in parameter units: the flow on standardised theta, given its context (the embedded
+    x_obs), mapped back. Saved as the flow's config, weights and context (data_files.py): the conditioned zuko
+    distribution is rebuilt from them, and the embedding that made the context is not needed."""
+
+    def __init__(self, cfg: FlowConfig, flow: zuko.flows.NSF, context: torch.Tensor, shift: torch.Tensor,
+                 scale: torch.Tensor):
+        self.cfg, self.flow, self.context = cfg, flow, context
+        self.dist = flow(context)
+        self.shift, self.scale = shift.double(), scale.double()
         self._log_jacobian = torch.log(self.scale).sum()
+
+    def to_state(self) -> dict:
+        return {"cfg": self.cfg, "flow": self.flow.state_dict(), "context": self.context, "shift": self.shift,
+                "scale": self.scale}
+
+    @classmethod
+    @torch.no_grad()
+    def from_state(cls, fields: dict) -> FlowConditional:
+        flow = _nsf(fields["cfg"], fields["shift"].shape[0], fields["context"].shape[-1])
+        flow.load_state_dict(fields["flow"])
+        return cls(fields["cfg"], flow.eval(), fields["context"], fields["shift"], fields["scale"])
 
     @property
     def dim(self) -> int:
@@ -72,6 +95,7 @@ class FlowConditional(ParameterDistribution):
         return lp.reshape(z.shape[:-1]) - self._log_jacobian
 
 
+@data_class
 class Flow(StandardizedDensityModel):
     """`embedding` (optional, as for MDNN): a trainable module mapping standardised summaries
     [N, x_dim] to the flow's context [N, E], trained jointly."""
@@ -82,8 +106,7 @@ class Flow(StandardizedDensityModel):
         self.projection = input_projection(cfg, theta_dim, x_dim, embedding)
         with torch.no_grad():
             context = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
-        self.flow = zuko.flows.NSF(theta_dim, context, bins=cfg.bins, transforms=cfg.transforms,
-                                   hidden_features=list(cfg.hidden))
+        self.flow = _nsf(cfg, theta_dim, context)
         self.x_norm, self.theta_norm = Standardizer(x_dim), Standardizer(theta_dim)
         self.net = nn.ModuleDict({"embedding": self.embedding, "flow": self.flow,
                                   "x_norm": self.x_norm, "theta_norm": self.theta_norm,
@@ -96,8 +119,8 @@ class Flow(StandardizedDensityModel):
     def conditional(self, x_obs: torch.Tensor) -> FlowConditional:
         """q(theta | x_obs) for one summary x_obs [F], with sample and log_prob in parameter units."""
         self.net.eval()
-        dist = self.flow(self.embedding(self.inputs(x_obs.float().reshape(1, -1)))[0])
-        return FlowConditional(dist, self.theta_norm.shift, self.theta_norm.scale)
+        context = self.embedding(self.inputs(x_obs.float().reshape(1, -1)))[0]
+        return FlowConditional(self.cfg, self.flow, context, self.theta_norm.shift, self.theta_norm.scale)
 
 
 @register("model", "flow", FlowConfig)

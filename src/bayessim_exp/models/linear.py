@@ -14,13 +14,15 @@ import dataclasses
 
 import torch
 
+from ..data_files import data_class
 from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError, TrainingError
 from ..registry import register
-from .base import column_scale
+from .base import SavedAsData, column_scale
 from .projection import RidgeSystem
 
 
+@data_class
 @dataclasses.dataclass
 class LinearConfig:
     penalties: list[float]  # ridge penalties tried, on standardised summaries
@@ -37,7 +39,8 @@ def _predict(z: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
     return z @ weights[:-1] + weights[-1]
 
 
-class LinearGaussian:
+@data_class
+class LinearGaussian(SavedAsData):
     def __init__(self, cfg: LinearConfig, theta_dim: int, x_dim: int):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
         self.shift, self.scale = torch.zeros(x_dim, dtype=torch.float64), torch.ones(x_dim, dtype=torch.float64)

@@ -25,6 +25,7 @@ import torch
 from scipy import optimize
 from torch import nn
 
+from ..data_files import data_class
 from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError
 from ..registry import register
@@ -38,6 +39,7 @@ _CALIBRATION_CHUNK = 512  # pairs per pass: dense precision factors of 100-param
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 
 
+@data_class
 @dataclasses.dataclass
 class MdnnConfig(TrainConfig):
     components: int
@@ -99,6 +101,7 @@ class MixtureHead(nn.Module):
         return HeadNLL.apply(self.out(h), theta, self.upper_rows, self.upper_cols, self.k)
 
 
+@data_class
 class MDNN(StandardizedDensityModel):
     """`embedding` (optional): a trainable module in front of the network, trained jointly
     (learned summaries); it maps standardised summaries [N, x_dim] to features [N, E]."""

@@ -19,6 +19,7 @@ import torch
 from scipy import stats
 from torch import nn
 
+from ..data_files import data_class
 from ..errors import ConfigError
 from ..registry import register
 from .base import Standardizer, TrainConfig
@@ -29,6 +30,7 @@ from .spread import SpreadScale
 KERNELS = {"rbf": None, "matern12": 1.0, "matern32": 3.0, "matern52": 5.0}
 
 
+@data_class
 @dataclasses.dataclass
 class MdrffConfig(TrainConfig):
     features: int  # random Fourier features (cos and sin of features / 2 frequencies)
@@ -83,6 +85,7 @@ class RandomFourierFeatures(nn.Module):
         return torch.cat([torch.cos(proj), torch.sin(proj)], -1) / math.sqrt(self.frequencies.shape[0])
 
 
+@data_class
 class MDRFF(MDNN):
     """MDNN's training, conditioning and state handling around a random-Fourier-feature body."""
 

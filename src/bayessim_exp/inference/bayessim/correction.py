@@ -26,6 +26,7 @@ from collections.abc import Callable, Sequence
 
 import torch
 
+from ...data_files import data_class
 from ...distributions.base import ParameterDistribution
 from ...distributions.importance import DefensiveMixture, ImportancePosterior
 from ...distributions.independent import BoxUniform, GaussianPrior
@@ -247,6 +248,7 @@ def _no_wider_than(mix: GaussianMixture, cov0: torch.Tensor) -> GaussianMixture:
     return GaussianMixture(mix.log_weights, mix.means, loewner_min(mix.covs, cov0))
 
 
+@data_class
 class CorrectedProduct:
     """log p(theta)^prior_power + tau * (sum_i log q_i(theta | x_i) - sum_j log p~_j(theta)), up to a
     constant; -inf outside the prior's support. A class, not a closure, so posteriors built on it can be saved."""

@@ -27,7 +27,7 @@ from bayessim_exp import registry
 from bayessim_exp.artifacts import RunDir
 from bayessim_exp.components import build_components
 from bayessim_exp.diagnostics.extrapolation import inputs_outside
-from bayessim_exp.diagnostics.scoring import own_level
+from bayessim_exp.distributions.hpd import own_level
 from bayessim_exp.inference.bayessim.condition import condition
 from bayessim_exp.run_config import check_run_config
 from bayessim_exp.stages import RoundContext

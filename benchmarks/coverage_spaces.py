@@ -38,7 +38,7 @@ def main() -> None:
 
     from bayessim_exp import api
     from bayessim_exp.diagnostics.coverage import credibility_ranks
-    from bayessim_exp.diagnostics.scoring import hpd_level
+    from bayessim_exp.distributions.hpd import hpd_level
     from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
     from bayessim_exp.pipeline import Pipeline
 

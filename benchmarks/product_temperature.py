@@ -27,7 +27,7 @@ import time
 import torch
 
 from bayessim_exp import api
-from bayessim_exp.diagnostics.scoring import own_level
+from bayessim_exp.distributions.hpd import own_level
 from bayessim_exp.distributions.independent import BoxUniform
 from bayessim_exp.distributions.probit import ProbitPosterior, standard_normal_prior
 from bayessim_exp.inference.bayessim.condition import tempered_product

@@ -112,3 +112,23 @@ def test_no_module_imports_itself_back_at_import_time():
     graph = {name: _module_imports(name, path, set(paths)) for name, path in paths.items()}
     assert "bayessim_exp.rl.config" in graph["bayessim_exp.rl.component"]  # the parser sees relative imports
     assert _cycle(graph) is None, " -> ".join(_cycle(graph))
+
+
+def test_no_subpackage_imports_itself_back_through_another():
+    """Subpackages (sim, tasks, models, diagnostics, ...) import each other one way only; a top-level module
+    (registry, pipeline, ...) counts as a node of its own."""
+    src = Path(bayessim_exp.__file__).parent
+    paths = {}
+    for path in src.rglob("*.py"):
+        parts = ("bayessim_exp", *path.relative_to(src).with_suffix("").parts)
+        paths[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+
+    def node(module: str) -> str:
+        return ".".join(module.split(".")[:2])  # bayessim_exp.<subpackage or top-level module>
+
+    graph: dict[str, set[str]] = {}
+    for name, path in paths.items():
+        graph.setdefault(node(name), set()).update(
+            node(target) for target in _module_imports(name, path, set(paths)) if node(target) != node(name))
+    assert "bayessim_exp.distributions" in graph["bayessim_exp.models"]
+    assert _cycle(graph) is None, " -> ".join(_cycle(graph))

@@ -7,7 +7,7 @@ import torch
 
 from bayessim_exp.diagnostics.guard import check_posterior, coverage_band
 from bayessim_exp.diagnostics.local_coverage import local_coverage
-from bayessim_exp.diagnostics.scoring import hpd_level
+from bayessim_exp.distributions.hpd import hpd_level
 from bayessim_exp.distributions.independent import GaussianPrior
 from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.inference.bayessim.correction import posterior

@@ -4,7 +4,7 @@ below 1 where they are too narrow, against a linear-Gaussian model whose posteri
 import pytest
 import torch
 
-from bayessim_exp.diagnostics.scoring import hpd_level
+from bayessim_exp.distributions.hpd import hpd_level
 from bayessim_exp.distributions.independent import GaussianPrior
 from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.inference.bayessim.correction import posterior

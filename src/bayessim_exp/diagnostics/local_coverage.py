@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 import torch
 
 from ..distributions.base import ParameterDistribution
-from .scoring import own_level, shares_inside
+from ..distributions.hpd import own_level, shares_inside
 
 
 def local_coverage(posterior_given: Callable[[list], ParameterDistribution], real: list,

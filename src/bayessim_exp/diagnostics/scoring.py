@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from ..distributions.base import ParameterDistribution
+from ..distributions.hpd import hpd_level
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -25,32 +26,6 @@ def _finite_or_none(value: float) -> float | None:
 
 
 TRUTH_DRAWS = 4000  # posterior draws the truth is ranked among (a share's standard error <= 0.008)
-
-
-def hpd_level(posterior: ParameterDistribution, theta: torch.Tensor, draws: torch.Tensor,
-              generator: torch.Generator) -> float | None:
-    """The share of `draws` (from posterior) denser than theta [1, D]: theta lies in the level-L HPD region iff
-    it is below L; None where theta has no density. Draws as dense as theta (a flat distribution: the prior
-    handed on by the guard) count by a uniform share of them, so a flat distribution's level is uniform."""
-    at_theta = float(posterior.log_prob(theta))
-    if not math.isfinite(at_theta):
-        return None
-    lp = posterior.log_prob(draws)
-    ties = float((lp == at_theta).double().mean())
-    return float((lp > at_theta).double().mean()) + float(torch.rand(1, generator=generator, dtype=torch.float64)) * ties
-
-
-
-def own_level(posterior: ParameterDistribution, theta: torch.Tensor, draws: int, generator: torch.Generator) -> float:
-    """hpd_level of a simulation's own parameters theta [D] among `draws` fresh draws of the posterior given it;
-    1 (outside every region) where the posterior has no density there."""
-    level = hpd_level(posterior, theta[None], posterior.sample((draws,), generator=generator).double(), generator)
-    return 1.0 if level is None else level
-
-
-def shares_inside(levels_of: torch.Tensor, levels) -> dict[str, float]:
-    """{level: share of the HPD levels `levels_of` below it}: how often the level-L regions held their parameters."""
-    return {f"{level:g}": float((levels_of < level).double().mean()) for level in levels}
 
 
 def truth_rank(posterior: ParameterDistribution, names: list[str], true: np.ndarray, seed: int) -> dict:

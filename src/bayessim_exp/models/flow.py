@@ -20,7 +20,6 @@ from torch import nn
 from ..data_files import data_class
 from ..distributions.base import ParameterDistribution, seeded_by
 from ..errors import ConfigError
-from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
 from .mdnn import input_projection
 
@@ -123,6 +122,5 @@ class Flow(StandardizedDensityModel):
         return FlowConditional(self.cfg, self.flow, context, self.theta_norm.shift, self.theta_norm.scale)
 
 
-@register("model", "flow", FlowConfig)
 def flow(cfg: FlowConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None) -> Flow:
     return Flow(cfg, theta_dim, x_dim, embedding)

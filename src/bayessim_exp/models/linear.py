@@ -17,7 +17,6 @@ import torch
 from ..data_files import data_class
 from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError, TrainingError
-from ..registry import register
 from .base import SavedAsData, column_scale
 from .projection import RidgeSystem
 
@@ -106,6 +105,5 @@ class LinearGaussian(SavedAsData):
         self.shift, self.scale, self.weights, self.cov = state["shift"], state["scale"], state["weights"], state["cov"]
 
 
-@register("model", "linear", LinearConfig)
 def linear(cfg: LinearConfig, theta_dim: int, x_dim: int) -> LinearGaussian:
     return LinearGaussian(cfg, theta_dim, x_dim)

@@ -28,7 +28,6 @@ from torch import nn
 from ..data_files import data_class
 from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError
-from ..registry import register
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
 from .mixture_nll import LOG_DIAGONAL_BOUND, HeadNLL, mixture_nll
 from .projection import RidgeProjection
@@ -197,6 +196,5 @@ class MDNN(StandardizedDensityModel):
         return std.affine(self.theta_norm.shift, self.theta_norm.scale)
 
 
-@register("model", "mdnn", MdnnConfig)
 def mdnn(cfg: MdnnConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None) -> MDNN:
     return MDNN(cfg, theta_dim, x_dim, embedding)

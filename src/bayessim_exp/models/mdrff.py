@@ -21,7 +21,6 @@ from torch import nn
 
 from ..data_files import data_class
 from ..errors import ConfigError
-from ..registry import register
 from .base import Standardizer, TrainConfig
 from .mdnn import ACTIVATIONS, MDNN, MixtureHead, input_projection
 from .spread import SpreadScale
@@ -119,6 +118,5 @@ class MDRFF(MDNN):
                            calibration_only=calibration_only)
 
 
-@register("model", "mdrff", MdrffConfig)
 def mdrff(cfg: MdrffConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None) -> MDRFF:
     return MDRFF(cfg, theta_dim, x_dim, embedding)

@@ -26,7 +26,7 @@ import math
 import torch
 from torch import nn
 
-from ..diagnostics.scoring import shares_inside
+from ..distributions.hpd import shares_inside
 
 JOINT_LEVELS = (0.5, 0.9)  # the regions the common factor calibrates (those the guard and the studies read)
 JOINT_ROWS = 1000  # validation pairs to fit it on (the caller's cut): a share's standard error at 90 % is 0.01

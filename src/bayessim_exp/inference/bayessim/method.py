@@ -28,8 +28,8 @@ from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
 from ...diagnostics.replayed_check import replayed_check
-from ...diagnostics.scoring import own_level
 from ...distributions.base import ParameterDistribution
+from ...distributions.hpd import own_level
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...distributions.truncated_prior import TruncatedPrior
 from ...errors import ConfigError, PosteriorError

@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 
 import torch
 
-from ...diagnostics.scoring import shares_inside
+from ...distributions.hpd import shares_inside
 
 COARSE = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
 _FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the best coarse one

@@ -1,8 +1,7 @@
 """Adam (Kingma & Ba 2015, L2 weight decay added to the gradient) without torch.optim.
 
 torch.optim imports torch._dynamo when an optimiser is built (its add_param_group is wrapped to stay
-out of compilation): 1.7 s on the 2-core development machine, 5.4 s on the lent H100 machine's host,
-once per process, for a run that never compiles. The arithmetic is torch.optim.Adam's: on a CPU its
+out of compilation): seconds once per process (docs/benchmarks.md) for a run that never compiles. The arithmetic is torch.optim.Adam's: on a CPU its
 single-tensor path (identical results), on a GPU its fused kernel with the step counts on the device,
 so that the update can be captured in a CUDA graph.
 """

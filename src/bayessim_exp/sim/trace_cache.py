@@ -2,8 +2,7 @@
 
 JAX's persistent compilation cache keeps XLA's compiled programs, but each process still traces and
 lowers the Python functions first: for MJX's reset (the derived constants and a forward pass, under
-vmap) and the fused rollout that was 2.7 s of a 20 s default run on the H100 machine
-(docs/benchmarks.md). A function traced once is exported (serialized StableHLO) under a key, and a
+vmap) and the fused rollout, a large share of a short GPU run (docs/benchmarks.md). A function traced once is exported (serialized StableHLO) under a key, and a
 later process with the same key calls the exported program instead of tracing.
 
 The key holds everything a trace can depend on: the caller's description of what the function closes

@@ -23,6 +23,7 @@ from . import registry
 from .artifacts import RunDir
 from .data_files import data_class, load_state, save_state
 from .distributions.base import ParameterDistribution
+from .distributions.convert import as_parameter_distribution
 from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from .distributions.probit import ProbitTransform
 from .errors import DataFileError
@@ -49,7 +50,7 @@ class FittedPosterior:
         training parameters were drawn from, if not the prior (SNPE-A correction; what a prior may be);
         `combination`: how several summaries are combined (inference/bayessim/combination.py)."""
         return condition(self.model, torch.as_tensor(x_obs), self.prior, self.max_components,
-                         proposal=_parameter_distribution(proposal, "proposal"), probit=self.probit,
+                         proposal=as_parameter_distribution(proposal, "proposal"), probit=self.probit,
                          combination=combination)[0]
 
     def save(self, path: str | Path) -> None:
@@ -73,24 +74,6 @@ class FittedPosterior:
         return d
 
 
-def _parameter_distribution(dist, what: str = "prior") -> ParameterDistribution | None:
-    """The project's distribution for a prior (or proposal) given to the API: ours as they are, None (a flat
-    improper prior) as it is, and torch's independent uniforms and Gaussians over a vector of parameters
-    converted (sbi's BoxUniform is an Independent(Uniform)). Anything else is refused here, at the call, rather
-    than deep inside conditioning."""
-    if dist is None or isinstance(dist, ParameterDistribution):
-        return dist
-    tdist = torch.distributions
-    base = dist.base_dist if isinstance(dist, tdist.Independent) and dist.reinterpreted_batch_ndims == 1 else dist
-    if isinstance(base, tdist.Uniform) and len(base.batch_shape) == 1:
-        return BoxUniform(base.low, base.high)
-    if isinstance(base, tdist.Normal) and len(base.batch_shape) == 1:
-        return GaussianPrior(base.loc, base.scale)  # untruncated
-    raise TypeError(f"{what}={dist!r} is not supported: give api.BoxUniform, api.GaussianPrior or api.LogUniform, "
-                    "or torch's Independent(Uniform(low, high), 1) / Independent(Normal(loc, scale), 1) (or a "
-                    "Uniform / Normal) over a vector [D] of parameters")
-
-
 def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=None, seed: int = 0,
                         probit: bool = False, **cfg: Any) -> FittedPosterior:
     """Fit model `name` (mdnn, ...) to simulations (theta [N, D], x [N, F]); cfg overrides the defaults in
@@ -100,7 +83,7 @@ def fit_posterior_model(name: str, theta: torch.Tensor, x: torch.Tensor, prior=N
     probit=True fits the model to the parameters mapped onto R^D by the prior's marginal CDFs
     (distributions/probit.py; needs an independent prior on a box); posteriors come back in parameter units.
     """
-    prior = _parameter_distribution(prior)
+    prior = as_parameter_distribution(prior)
     theta, x = torch.as_tensor(theta), torch.as_tensor(x)
     if prior is not None and prior.dim != theta.shape[1]:
         raise ValueError(f"the prior is over {prior.dim} parameters, theta has {theta.shape[1]} columns")

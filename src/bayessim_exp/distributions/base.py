@@ -9,6 +9,11 @@ never switch on the concrete class:
     mean, stddev          float64 [D]; Monte Carlo with a fixed seed unless a subclass knows them exactly
     superlevel_box(level) a box around {log_prob >= level}, or None (truncated proposals sample within it)
     effective_sample_size the draws an importance-sampling estimate rests on; None where exact
+    gaussian_factor()     the Gaussian the density is on its support, for the SNPE-A correction's closed form
+    as_gaussian_mixture() itself where it is a Gaussian mixture over R^D, else None
+    restricts(prior)      whether it is the prior restricted to a region (no correction needed)
+    in_probit_space()     the distribution over probit space it maps back, or None
+    independent           marginal_cdf, marginal_icdf, log_marginal answer (priors: probit space)
     save(path), load(path)        a data file (data_files.py), never a pickle
 """
 
@@ -17,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import functools
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -26,6 +32,11 @@ from ..errors import DataFileError
 # draws behind Monte Carlo moments: the standard error of the mean is stddev / 140
 _MOMENT_DRAWS = 20_000
 _MOMENT_SEED = 12345
+# gaussian_factor's answer where the density is neither a Gaussian's nor constant on its support
+NOT_GAUSSIAN = "not Gaussian"
+
+if TYPE_CHECKING:
+    from .mixture import GaussianMixture
 
 
 class ParameterDistribution:
@@ -52,6 +63,45 @@ class ParameterDistribution:
         """Where the distribution is an importance-sampling estimate, the effective number of draws it
         rests on (the guard refuses too few); None for distributions known exactly."""
         return None
+
+    def gaussian_factor(self) -> tuple[torch.Tensor, torch.Tensor] | None | str:
+        """(mean, cov) of the Gaussian the density equals on its support up to a constant, None where it is
+        constant there, NOT_GAUSSIAN otherwise: the SNPE-A correction is in closed form for the first two."""
+        return NOT_GAUSSIAN
+
+    def as_gaussian_mixture(self) -> GaussianMixture | None:
+        """Itself where it is a Gaussian mixture over R^D (products and moments in closed form), else None."""
+        return None
+
+    def restricts(self, prior: ParameterDistribution) -> bool:
+        """Whether its density is prior's times a constant wherever it is positive: a model trained on its
+        draws needs no proposal correction (the prior itself is handled by the caller)."""
+        return False
+
+    def in_probit_space(self) -> ParameterDistribution | None:
+        """The distribution over u = probit(theta) (distributions/probit.py) that this one maps back to
+        parameter units; None where it is not defined that way."""
+        return None
+
+    # independent distributions (the priors) answer the per-coordinate questions below: probit space needs them
+    independent = False
+
+    def marginal_cdf(self, theta: torch.Tensor) -> torch.Tensor:
+        """F_d(theta_d) per coordinate: [..., D]."""
+        raise NotImplementedError(f"{type(self).__name__} has no independent marginals")
+
+    def marginal_icdf(self, c: torch.Tensor) -> torch.Tensor:
+        """F_d^-1(c_d) per coordinate: [..., D]."""
+        raise NotImplementedError(f"{type(self).__name__} has no independent marginals")
+
+    def log_marginal(self, theta: torch.Tensor) -> torch.Tensor:
+        """log p_d(theta_d) per coordinate: [..., D]."""
+        raise NotImplementedError(f"{type(self).__name__} has no independent marginals")
+
+    @property
+    def peak(self) -> torch.Tensor:
+        """A point of largest density (of an independent distribution, on its support)."""
+        raise NotImplementedError(f"{type(self).__name__} has no independent marginals")
 
     @functools.cached_property
     def _moments(self) -> tuple[torch.Tensor, torch.Tensor]:

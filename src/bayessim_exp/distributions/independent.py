@@ -1,8 +1,8 @@
 """Independent per-parameter distributions: the priors (box uniform, log-uniform, Gaussian).
 
-Bounded ones expose their box as `low`/`high`, the support posteriors are truncated to;
-`GaussianPrior` also exposes `loc`/`scale` of the untruncated Gaussian, which the SNPE-A
-correction uses in closed form.
+Bounded ones expose their box as `low`/`high`, the support posteriors are truncated to; each answers
+its per-coordinate CDF, inverse CDF and log density (probit space, distributions/probit.py) and its
+Gaussian factor (the SNPE-A correction in closed form: the untruncated Gaussian's, or none for a uniform).
 """
 
 from __future__ import annotations
@@ -16,6 +16,12 @@ from ..data_files import data_class
 from .base import ParameterDistribution
 from .box import restrict_log_prob
 
+_LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+
+
+def std_normal_log_pdf(u: torch.Tensor) -> torch.Tensor:
+    return -0.5 * u**2 - _LOG_SQRT_2PI
+
 
 def _uniform(shape: tuple[int, ...], dim: int, generator: torch.Generator | None) -> torch.Tensor:
     return torch.rand(*shape, dim, dtype=torch.float64, generator=generator)
@@ -25,8 +31,26 @@ def _uniform(shape: tuple[int, ...], dim: int, generator: torch.Generator | None
 class BoxUniform(ParameterDistribution):
     """Uniform over [low, high]^D."""
 
+    independent = True
+
     def __init__(self, low: torch.Tensor, high: torch.Tensor):
         self.low, self.high = torch.as_tensor(low).double(), torch.as_tensor(high).double()
+
+    def gaussian_factor(self) -> None:
+        return None  # constant on the box
+
+    def marginal_cdf(self, theta: torch.Tensor) -> torch.Tensor:
+        return (theta - self.low) / (self.high - self.low)
+
+    def marginal_icdf(self, c: torch.Tensor) -> torch.Tensor:
+        return self.low + c * (self.high - self.low)
+
+    def log_marginal(self, theta: torch.Tensor) -> torch.Tensor:
+        return -torch.log(self.high - self.low).expand_as(theta)
+
+    @property
+    def peak(self) -> torch.Tensor:
+        return self.low
 
     @property
     def dim(self) -> int:
@@ -53,9 +77,24 @@ class BoxUniform(ParameterDistribution):
 class LogUniform(ParameterDistribution):
     """log(theta) uniform over [log low, log high] per parameter (scale parameters: masses, gains)."""
 
+    independent = True
+
     def __init__(self, low: torch.Tensor, high: torch.Tensor):
         self.low, self.high = torch.as_tensor(low).double(), torch.as_tensor(high).double()
         self._log_low, self._log_high = self.low.log(), self.high.log()
+
+    def marginal_cdf(self, theta: torch.Tensor) -> torch.Tensor:
+        return (torch.log(theta) - self._log_low) / (self._log_high - self._log_low)
+
+    def marginal_icdf(self, c: torch.Tensor) -> torch.Tensor:
+        return torch.exp(self._log_low + c * (self._log_high - self._log_low))
+
+    def log_marginal(self, theta: torch.Tensor) -> torch.Tensor:
+        return -torch.log(theta) - torch.log(self._log_high - self._log_low)
+
+    @property
+    def peak(self) -> torch.Tensor:
+        return self.low
 
     @property
     def dim(self) -> int:
@@ -88,6 +127,8 @@ class GaussianPrior(ParameterDistribution):
     and the density is renormalised by the product of the per-coordinate masses.
     """
 
+    independent = True
+
     def __init__(self, mean: torch.Tensor, std: torch.Tensor,
                  low: torch.Tensor | None = None, high: torch.Tensor | None = None):
         self.loc, self.scale = torch.as_tensor(mean).double(), torch.as_tensor(std).double()
@@ -106,6 +147,26 @@ class GaussianPrior(ParameterDistribution):
     def covariance_matrix(self) -> torch.Tensor:
         """Of the untruncated Gaussian."""
         return torch.diag(self.scale**2)
+
+    def gaussian_factor(self) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.loc, self.covariance_matrix  # truncation only restricts the support
+
+    def marginal_cdf(self, theta: torch.Tensor) -> torch.Tensor:
+        cdf = ndtr((theta - self.loc) / self.scale)
+        return cdf if self.low is None else (cdf - self._cdf_low) / (self._cdf_high - self._cdf_low)
+
+    def marginal_icdf(self, c: torch.Tensor) -> torch.Tensor:
+        if self.low is None:
+            return self.loc + self.scale * ndtri(c)
+        return self.loc + self.scale * ndtri(self._cdf_low + c * (self._cdf_high - self._cdf_low))
+
+    def log_marginal(self, theta: torch.Tensor) -> torch.Tensor:
+        lp = std_normal_log_pdf((theta - self.loc) / self.scale) - torch.log(self.scale)
+        return lp if self.low is None else lp - torch.log(self._cdf_high - self._cdf_low)
+
+    @property
+    def peak(self) -> torch.Tensor:
+        return self.loc if self.low is None else self.loc.clamp(self.low, self.high)
 
     @property
     def mean(self) -> torch.Tensor:

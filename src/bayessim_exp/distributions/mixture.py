@@ -12,7 +12,7 @@ import math
 import torch
 
 from ..data_files import data_class
-from .base import ParameterDistribution
+from .base import NOT_GAUSSIAN, ParameterDistribution
 from .box import inside, restrict_log_prob
 from .ghk import ghk
 from .rejection import sample_by_rejection
@@ -93,6 +93,12 @@ class GaussianMixture(ParameterDistribution):
     @property
     def num_components(self) -> int:
         return self.means.shape[0]
+
+    def gaussian_factor(self) -> tuple[torch.Tensor, torch.Tensor] | str:
+        return (self.means[0], self.covs[0]) if self.num_components == 1 else NOT_GAUSSIAN
+
+    def as_gaussian_mixture(self) -> GaussianMixture:
+        return self
 
     @property
     def dim(self) -> int:
@@ -239,6 +245,9 @@ class TruncatedMixture(ParameterDistribution):
 
     def superlevel_box(self, level: float) -> tuple[torch.Tensor, torch.Tensor] | None:
         return self.mixture.superlevel_box(level + self._log_mass)
+
+    def gaussian_factor(self) -> tuple[torch.Tensor, torch.Tensor] | str:
+        return self.mixture.gaussian_factor()  # truncation only restricts the support
 
     @property
     def log_mass_inside(self) -> float:

@@ -15,7 +15,6 @@ log-uniform, truncated Gaussian). Under the prior u is exactly standard normal, 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import torch
@@ -24,16 +23,11 @@ from torch.special import ndtr, ndtri
 from ..data_files import data_class
 from .base import ParameterDistribution
 from .box import restrict_log_prob
-from .independent import BoxUniform, GaussianPrior, LogUniform
+from .independent import GaussianPrior, std_normal_log_pdf
 from .mixture import GaussianMixture
 
 # CDF values are kept this far from 0 and 1, so u stays finite (|u| <= 7.9) at the box's faces
 _EDGE = 1e-15
-_LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
-
-
-def _std_normal_log_pdf(u: torch.Tensor) -> torch.Tensor:
-    return -0.5 * u**2 - _LOG_SQRT_2PI
 
 
 @data_class
@@ -41,8 +35,7 @@ class ProbitTransform:
     """theta (in the prior's box) <-> u in R^D with u ~ N(0, I) under the prior."""
 
     def __init__(self, prior: ParameterDistribution):
-        if isinstance(prior, GaussianPrior) and prior.low is None or not isinstance(
-                prior, (BoxUniform, LogUniform, GaussianPrior)):
+        if not isinstance(prior, ParameterDistribution) or not prior.independent or prior.low is None:
             raise ValueError(f"probit space needs an independent prior on a box (uniform, loguniform or gaussian "
                              f"with a box), got {type(prior).__name__}")
         self.prior = prior
@@ -52,44 +45,16 @@ class ProbitTransform:
     def dim(self) -> int:
         return self.low.shape[0]
 
-    def _cdf(self, theta: torch.Tensor) -> torch.Tensor:
-        p = self.prior
-        if isinstance(p, BoxUniform):
-            return (theta - self.low) / (self.high - self.low)
-        if isinstance(p, LogUniform):
-            return (torch.log(theta) - p._log_low) / (p._log_high - p._log_low)
-        return (ndtr((theta - p.loc) / p.scale) - p._cdf_low) / (p._cdf_high - p._cdf_low)
-
-    def _inverse_cdf(self, c: torch.Tensor) -> torch.Tensor:
-        p = self.prior
-        if isinstance(p, BoxUniform):
-            return self.low + c * (self.high - self.low)
-        if isinstance(p, LogUniform):
-            return torch.exp(p._log_low + c * (p._log_high - p._log_low))
-        return p.loc + p.scale * ndtri(p._cdf_low + c * (p._cdf_high - p._cdf_low))
-
-    def _log_marginals(self, theta: torch.Tensor) -> torch.Tensor:
-        """log p_d(theta_d) per coordinate: [..., D]."""
-        p = self.prior
-        if isinstance(p, BoxUniform):
-            return -torch.log(self.high - self.low).expand_as(theta)
-        if isinstance(p, LogUniform):
-            return -torch.log(theta) - torch.log(p._log_high - p._log_low)
-        z = (theta - p.loc) / p.scale
-        return _std_normal_log_pdf(z) - torch.log(p.scale) - torch.log(p._cdf_high - p._cdf_low)
-
     def to_probit(self, theta: torch.Tensor) -> torch.Tensor:
-        unit = self._cdf(theta.double().clamp(self.low, self.high)).clamp(_EDGE, 1 - _EDGE)
+        unit = self.prior.marginal_cdf(theta.double().clamp(self.low, self.high)).clamp(_EDGE, 1 - _EDGE)
         return ndtri(unit)
 
     def from_probit(self, u: torch.Tensor) -> torch.Tensor:
-        return self._inverse_cdf(ndtr(u.double())).clamp(self.low, self.high)
+        return self.prior.marginal_icdf(ndtr(u.double())).clamp(self.low, self.high)
 
     def log_prior_peak(self) -> float:
         """The prior's largest log density on its box."""
-        p = self.prior
-        at = p.loc.clamp(self.low, self.high) if isinstance(p, GaussianPrior) else self.low
-        return float(self._log_marginals(at).sum())
+        return float(self.prior.log_marginal(self.prior.peak).sum())
 
     def prior_between(self, low_u: torch.Tensor, high_u: torch.Tensor) -> tuple[float, Callable[..., torch.Tensor]]:
         """The prior restricted to the probit box [low_u, high_u]: (its prior mass, sample(n, generator)),
@@ -98,14 +63,14 @@ class ProbitTransform:
 
         def sample(n: int, generator: torch.Generator | None = None) -> torch.Tensor:
             c = c_low + torch.rand(n, self.dim, dtype=torch.float64, generator=generator) * (c_high - c_low)
-            return self._inverse_cdf(c).clamp(self.low, self.high)
+            return self.prior.marginal_icdf(c).clamp(self.low, self.high)
 
         return float((c_high - c_low).prod()), sample
 
     def log_abs_det_jacobian(self, theta: torch.Tensor) -> torch.Tensor:
         """log |du/dtheta| = sum_d log p_d(theta_d) - log phi(u_d): [...]."""
         theta = theta.double().clamp(self.low, self.high)
-        return (self._log_marginals(theta) - _std_normal_log_pdf(self.to_probit(theta))).sum(-1)
+        return (self.prior.log_marginal(theta) - std_normal_log_pdf(self.to_probit(theta))).sum(-1)
 
 
 def standard_normal_prior(dim: int) -> GaussianPrior:
@@ -128,6 +93,9 @@ class ProbitPosterior(ParameterDistribution):
     @property
     def effective_sample_size(self) -> float | None:
         return self.inner.effective_sample_size
+
+    def in_probit_space(self) -> ParameterDistribution:
+        return self.inner
 
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         return self.transform.from_probit(self.inner.sample(shape, generator=generator))

@@ -63,6 +63,9 @@ class TruncatedPrior(ParameterDistribution):
         obj._candidates = _candidates(obj.prior, obj.posterior, obj.threshold)[1]
         return obj
 
+    def restricts(self, prior: ParameterDistribution) -> bool:
+        return self.prior is prior
+
     def _in_region(self, theta: torch.Tensor) -> torch.Tensor:
         return self.posterior.log_prob(theta) >= self.threshold
 

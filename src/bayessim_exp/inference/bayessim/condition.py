@@ -58,7 +58,8 @@ def _probit_proposal(proposal, prior):
     ratio); a previous probit-space posterior's inner distribution."""
     if needs_no_correction(proposal, prior):
         return None
-    if isinstance(proposal, ProbitPosterior):
-        return proposal.inner
+    inner = proposal.in_probit_space()
+    if inner is not None:
+        return inner
     raise ValueError(f"a probit-space model cannot correct for a {type(proposal).__name__} proposal in parameter units; "
                      "use proposal=truncated, prior or posterior")

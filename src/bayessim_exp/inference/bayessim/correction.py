@@ -27,12 +27,10 @@ from collections.abc import Callable, Sequence
 import torch
 
 from ...data_files import data_class
-from ...distributions.base import ParameterDistribution
+from ...distributions.base import NOT_GAUSSIAN, ParameterDistribution
 from ...distributions.importance import DefensiveMixture, ImportancePosterior
-from ...distributions.independent import BoxUniform, GaussianPrior
 from ...distributions.mixture import GaussianMixture, NotPositiveDefinite, TruncatedMixture
 from ...distributions.restricted import Restricted
-from ...distributions.truncated_prior import TruncatedPrior
 
 log = logging.getLogger(__name__)
 
@@ -43,15 +41,16 @@ _MOMENT_DRAWS = 4000
 
 
 def _gaussian_factor(dist) -> tuple[torch.Tensor, torch.Tensor] | None | str:
-    """(mean, cov) if dist is Gaussian on its support, None if constant there, "other" if neither."""
-    if dist is None or isinstance(dist, BoxUniform):  # None: an improper flat prior
+    """(mean, cov) if dist is Gaussian on its support, None if constant there (None: an improper flat prior),
+    NOT_GAUSSIAN if neither (ParameterDistribution.gaussian_factor; any other distribution is neither)."""
+    if dist is None:
         return None
-    if isinstance(dist, GaussianPrior):
-        return dist.loc, dist.covariance_matrix
-    mixture = dist.mixture if isinstance(dist, TruncatedMixture) else dist
-    if isinstance(mixture, GaussianMixture) and mixture.num_components == 1:
-        return mixture.means[0], mixture.covs[0]
-    return "other"
+    return dist.gaussian_factor() if isinstance(dist, ParameterDistribution) else NOT_GAUSSIAN
+
+
+def _as_mixture(dist) -> GaussianMixture | None:
+    """dist where it is a Gaussian mixture over R^D; None for the rest (flows, torch distributions)."""
+    return dist.as_gaussian_mixture() if isinstance(dist, ParameterDistribution) else None
 
 
 def _box(dist) -> tuple[torch.Tensor, torch.Tensor] | None:
@@ -63,7 +62,8 @@ def _box(dist) -> tuple[torch.Tensor, torch.Tensor] | None:
 
 def needs_no_correction(proposal, prior) -> bool:
     """The prior itself, or the prior truncated to a high-density region (constant ratio there)."""
-    return proposal is None or proposal is prior or (isinstance(proposal, TruncatedPrior) and proposal.prior is prior)
+    return proposal is None or proposal is prior or (isinstance(proposal, ParameterDistribution)
+                                                     and proposal.restricts(prior))
 
 
 def _check_covers(prior, proposal) -> None:
@@ -101,15 +101,17 @@ def _apply_gaussian_ratio(mix: GaussianMixture, lam: torch.Tensor, eta: torch.Te
 
 def moments(dist, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
     """Mean and covariance: exact for a Gaussian mixture, else from _MOMENT_DRAWS seeded draws."""
-    if isinstance(dist, GaussianMixture):
-        return dist.mean, dist.covariance
+    mixture = _as_mixture(dist)
+    if mixture is not None:
+        return mixture.mean, mixture.covariance
     s = dist.sample((_MOMENT_DRAWS,), generator=torch.Generator().manual_seed(seed)).double()
     return s.mean(0), torch.atleast_2d(torch.cov(s.T))
 
 
 def _moment_gaussian(dist) -> GaussianMixture:
-    if isinstance(dist, GaussianMixture):
-        return dist
+    mixture = _as_mixture(dist)
+    if mixture is not None:
+        return mixture
     mean, cov = moments(dist)
     return GaussianMixture(torch.zeros(1), mean[None], cov[None])
 
@@ -269,12 +271,12 @@ class CorrectedProduct:
 
 
 def _closed_form_obstacle(conditionals, prior, prior_power: float, corrected: list) -> str | None:
-    if not all(isinstance(q, GaussianMixture) for q in conditionals):
+    if any(_as_mixture(q) is None for q in conditionals):
         return "the conditional density is not a Gaussian mixture"
-    if prior_power != 0 and _gaussian_factor(prior) == "other":
+    if prior_power != 0 and _gaussian_factor(prior) is NOT_GAUSSIAN:
         return f"the prior ({type(prior).__name__}) is neither Gaussian nor uniform"
     for p in corrected:
-        if isinstance(_gaussian_factor(p), str):
+        if _gaussian_factor(p) is NOT_GAUSSIAN:
             return f"the proposal ({type(p).__name__}) is not a single Gaussian or uniform"
     return None
 

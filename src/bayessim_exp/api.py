@@ -28,6 +28,7 @@ from .distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from .distributions.probit import ProbitTransform
 from .errors import DataFileError
 from .inference.bayessim.condition import condition
+from .inference.bayessim.correction import MAX_COMPONENTS
 
 __all__ = ["BoxUniform", "GaussianPrior", "LogUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
 
@@ -42,7 +43,7 @@ class FittedPosterior:
     prior: Any
     config: dict
     history: dict
-    max_components: int = 50
+    max_components: int = MAX_COMPONENTS
     probit: ProbitTransform | None = None  # set when the model was fitted in probit space
 
     def posterior(self, x_obs: torch.Tensor, proposal=None, combination: str = "dispersion"):

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 import torch
 
-from .correction import moments, posterior
+from .correction import MAX_COMPONENTS, moments, posterior
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ def dispersion(singles: Sequence, seed: int = 0) -> Dispersion:
     return Dispersion(q, dof, float(torch.special.gammaincc(torch.tensor(dof / 2.0), torch.tensor(q / 2.0))))
 
 
-def combine(method: str, conditionals: Sequence, prior, proposal=None, *, max_components: int = 50,
+def combine(method: str, conditionals: Sequence, prior, proposal=None, *, max_components: int = MAX_COMPONENTS,
             seed: int = 0, temperature: float = 1.0) -> tuple[object, Dispersion | None]:
     """The posterior given every real summary's conditional q(theta | x_i), and the dispersion of the
     per-trajectory posteriors (None for a single trajectory). `temperature` in (0, 1] multiplies the

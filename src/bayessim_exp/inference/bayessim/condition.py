@@ -18,10 +18,10 @@ from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...models.base import PosteriorModel
 from .combination import Dispersion, combine
-from .correction import needs_no_correction, tempered_posterior
+from .correction import MAX_COMPONENTS, needs_no_correction, tempered_posterior
 
 
-def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = 50, proposal=None,
+def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = MAX_COMPONENTS, proposal=None,
               seed: int = 0, probit: ProbitTransform | None = None, combination: str = "dispersion",
               temperature: float = 1.0) -> tuple[ParameterDistribution, Dispersion | None]:
     """The posterior given x_obs [n, F] (or one summary [F]), and the dispersion of the per-trajectory
@@ -41,7 +41,7 @@ def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components:
     return ProbitPosterior(post, probit), spread
 
 
-def tempered_product(conditionals: list, prior, max_components: int = 50, proposal=None, seed: int = 0,
+def tempered_product(conditionals: list, prior, max_components: int = MAX_COMPONENTS, proposal=None, seed: int = 0,
                      probit: ProbitTransform | None = None) -> Callable[[float], ParameterDistribution]:
     """The posterior given the model's per-trajectory posteriors q(theta | x_i), combined as their product with
     the likelihood ratios raised to a temperature, as a function of the temperature (correction.py's

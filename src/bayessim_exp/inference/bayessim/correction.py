@@ -38,6 +38,8 @@ log = logging.getLogger(__name__)
 _IS_DRAWS = 100_000
 _INFLATE = 4.0
 _MOMENT_DRAWS = 4000
+# mixture components kept in products: the Python API's default (the pipeline's is method.max_components)
+MAX_COMPONENTS = 50
 
 
 def _gaussian_factor(dist) -> tuple[torch.Tensor, torch.Tensor] | None | str:
@@ -139,7 +141,7 @@ def _temper(mix: GaussianMixture, tau: float) -> GaussianMixture:
     return GaussianMixture(tau * mix.log_weights + 0.5 * (1 - tau) * logdet, mix.means, mix.covs / tau)
 
 
-def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = 50, seed: int = 0,
+def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = MAX_COMPONENTS, seed: int = 0,
               temperature: float = 1.0):
     """p(theta | x_1..n) from q(theta | x_i) for each real summary (see the module docstring).
 
@@ -156,7 +158,7 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
     return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)(temperature)
 
 
-def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = 50,
+def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = MAX_COMPONENTS,
                        seed: int = 0) -> Callable[[float], ParameterDistribution]:
     """`posterior` as a function of the temperature, for callers that need it at several: the product of the
     conditionals, which no temperature changes (the power is applied to it), is computed once, at the first

@@ -30,8 +30,7 @@ from ...diagnostics.replay import replay
 from ...diagnostics.replayed_check import replayed_check
 from ...distributions.base import ParameterDistribution
 from ...distributions.hpd import own_level
-from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
-from ...distributions.truncated_prior import TruncatedPrior
+from ...distributions.probit import ProbitTransform, standard_normal_prior
 from ...errors import ConfigError, PosteriorError
 from ...models.base import column_scale
 from ...policies import OpenLoopPolicy, RandomPolicy
@@ -40,28 +39,20 @@ from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition, tempered_product
-from .proposals import moment_matched
+from .proposals import ProposalInputs, proposal_named
 from .replay_tempering import temper_to_replays
 from .set_calibration import product_temperature
 
 log = logging.getLogger(__name__)
 
-# proposal -> how rounds after the first draw their parameters (docs/statistics.md):
-#   prior      always the prior; every round's simulations train the model
-#   posterior  the previous posterior itself (SNPE-A; closed form only for one-component mixtures)
-#   gaussian   the previous posterior moment-matched to one Gaussian (SNPE-A in closed form for mixtures)
-#   truncated  the prior restricted to the previous posterior's 99.9 % HPD region (TSNPE, no correction)
-PROPOSALS = ("prior", "posterior", "gaussian", "truncated")
 # probit: fitted on the prior's CDFs mapped through the normal quantile (posteriors stay on the box);
 # box: in parameter units; auto: probit where the prior allows it (independent, on a box), else box
 PARAMETER_SPACES = ("auto", "probit", "box")
-# SNPE-A needs the model trained on draws from a single proposal: the current round's simulations only
-_SINGLE_ROUND_PROPOSALS = ("posterior", "gaussian")
 
 
 @dataclasses.dataclass
 class BayesSimConfig:
-    proposal: str  # prior | posterior | gaussian | truncated
+    proposal: str  # prior | posterior | gaussian | truncated | a plugin's (proposals.py)
     finetune: bool  # continue training the previous round's model (false: re-initialise)
     max_components: int  # mixture components kept when combining several real trajectories
     parameter_space: str  # auto | probit | box: what the model is fitted in (distributions/probit.py)
@@ -72,8 +63,7 @@ class BayesSimConfig:
     def validate(self) -> None:
         if self.parameter_space not in PARAMETER_SPACES:
             raise ConfigError(f"parameter_space={self.parameter_space!r} not allowed; allowed: {', '.join(PARAMETER_SPACES)}")
-        if self.proposal not in PROPOSALS:
-            raise ConfigError(f"proposal={self.proposal!r} not allowed; allowed: {', '.join(PROPOSALS)}")
+        proposal_named(self.proposal)
         if self.combination not in COMBINATIONS:
             raise ConfigError(f"combination={self.combination!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
         if self.on_guard not in ACTIONS:
@@ -85,6 +75,7 @@ class BayesSimConfig:
 class BayesSim(InferenceMethod):
     def __init__(self, cfg: BayesSimConfig, comp):
         self.cfg, self.comp = cfg, comp
+        self.proposer = proposal_named(cfg.proposal)
         self._proposals: dict[int, ParameterDistribution | None] = {}
         self.probit = None if cfg.parameter_space == "box" else _probit_transform(cfg.parameter_space, comp.prior)
 
@@ -101,34 +92,21 @@ class BayesSim(InferenceMethod):
 
     # proposals -----------------------------------------------------------------------
     def proposal(self, ctx: RoundContext) -> ParameterDistribution:
-        """The distribution round r draws its parameters from (see PROPOSALS)."""
-        return self.comp.prior if self.proposal_name(ctx) == "prior" else self._proposals[ctx.round]
+        """The distribution round r draws its parameters from (proposals.py)."""
+        proposal = self._round_proposal(ctx)
+        return self.comp.prior if proposal is None else proposal
 
     def proposal_name(self, ctx: RoundContext) -> str:
-        """The proposal round r really uses: `truncated` falls back to the prior when the previous round's
-        distribution is the prior (the guard's fallback) or its region is too small a share of it to
-        sample (many parameters)."""
+        """The proposal round r really uses: 'prior' where it falls back to the prior."""
+        return "prior" if self._round_proposal(ctx) is None else self.proposer.name
+
+    def _round_proposal(self, ctx: RoundContext) -> ParameterDistribution | None:
+        """Built once per round, with the round's seed whichever stage asks first; None: the prior."""
         r = ctx.round
-        if r == 1 or self.cfg.proposal == "prior":
-            return "prior"
-        if r not in self._proposals:
-            previous = self._handed_on(ctx, r - 1)
-            seed = stage_seed(ctx.run_seed, r, "proposal")  # fixed per round, whichever stage asks first
-            if previous is self.comp.prior:
-                self._proposals[r] = None
-            elif self.cfg.proposal == "truncated":
-                try:
-                    self._proposals[r] = TruncatedPrior(self.comp.prior, previous, seed=seed)
-                except ValueError as exc:
-                    log.warning("round %d: %s; simulating from the prior instead", r, exc)
-                    self._proposals[r] = None
-            elif self.cfg.proposal == "gaussian" and self.probit is not None:
-                self._proposals[r] = ProbitPosterior(moment_matched(previous.inner, seed=seed), self.probit)
-            elif self.cfg.proposal == "gaussian":
-                self._proposals[r] = moment_matched(previous, self.comp.prior.low, self.comp.prior.high, seed=seed)
-            else:
-                self._proposals[r] = previous
-        return "prior" if self._proposals[r] is None else self.cfg.proposal
+        if r > 1 and r not in self._proposals:
+            inputs = ProposalInputs(r, self.comp.prior, self.probit, stage_seed(ctx.run_seed, r, "proposal"))
+            self._proposals[r] = self.proposer.build(self._handed_on(ctx, r - 1), inputs)
+        return self._proposals.get(r)
 
     # stages --------------------------------------------------------------------------
     def collect(self, ctx: RoundContext) -> dict:
@@ -249,7 +227,7 @@ class BayesSim(InferenceMethod):
 
     def _fitted_rounds(self, ctx: RoundContext) -> range:
         """The rounds whose simulations the round's model is trained on."""
-        return range(ctx.round if self.cfg.proposal in _SINGLE_ROUND_PROPOSALS else 1, ctx.round + 1)
+        return range(1 if self.proposer.pools_rounds else ctx.round, ctx.round + 1)
 
     def _fitted_space(self, theta: torch.Tensor) -> torch.Tensor:
         return theta if self.probit is None else self.probit.to_probit(theta).float()

@@ -16,38 +16,34 @@ import dataclasses
 import logging
 from collections.abc import Callable
 
-import numpy as np
 import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
-from ...diagnostics.extrapolation import inputs_outside
 from ...diagnostics.guard import ACTIONS, check_posterior
-from ...diagnostics.identifiability import STEP, linear_read, sensitivity
-from ...diagnostics.local_coverage import local_coverage
+from ...diagnostics.identifiability import linear_read, sensitivity
 from ...diagnostics.mismatch import mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
 from ...diagnostics.replayed_check import replayed_check
 from ...distributions.base import ParameterDistribution
-from ...distributions.hpd import own_level
-from ...distributions.probit import ProbitTransform, standard_normal_prior
+from ...distributions.probit import standard_normal_prior
 from ...errors import ConfigError, PosteriorError
 from ...models.base import column_scale
-from ...policies import OpenLoopPolicy, RandomPolicy
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition, tempered_product
+from .identifiability_checks import log_findings, nominal_point, summaries_at
+from .model_checks import coverage_near_real, extrapolation
+from .parameter_space import PARAMETER_SPACES, probit_transform
 from .proposals import ProposalInputs, proposal_named
 from .replay_tempering import temper_to_replays
-from .set_calibration import product_temperature
+from .set_calibration import simulated_sets_temperature
+from .simulate import predictive_summaries, simulate_as_driven, without_noise
+from .training_data import exact_training_rows, held_out_count, split, summarized
 
 log = logging.getLogger(__name__)
-
-# probit: fitted on the prior's CDFs mapped through the normal quantile (posteriors stay on the box);
-# box: in parameter units; auto: probit where the prior allows it (independent, on a box), else box
-PARAMETER_SPACES = ("auto", "probit", "box")
 
 
 @dataclasses.dataclass
@@ -77,7 +73,7 @@ class BayesSim(InferenceMethod):
         self.cfg, self.comp = cfg, comp
         self.proposer = proposal_named(cfg.proposal)
         self._proposals: dict[int, ParameterDistribution | None] = {}
-        self.probit = None if cfg.parameter_space == "box" else _probit_transform(cfg.parameter_space, comp.prior)
+        self.probit = probit_transform(cfg.parameter_space, comp.prior)
 
     def stages(self) -> list[Stage]:
         return [
@@ -117,8 +113,8 @@ class BayesSim(InferenceMethod):
         rc = self.comp.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
         policy = self.comp.policy(ctx.seed, ctx)
-        exact = self._without_noise(policy)
-        n_exact = 0 if exact is None else 2 * self._held_out_count(len(theta))
+        exact = without_noise(policy)
+        n_exact = 0 if exact is None else 2 * held_out_count(len(theta), rc.diagnostics.held_out_fraction)
         cut = len(theta) - n_exact
         traj = self.comp.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)
         if n_exact:
@@ -126,21 +122,8 @@ class BayesSim(InferenceMethod):
             traj = Trajectories.cat([traj, self.comp.sims.rollout(theta[cut:], exact, rc.collect.horizon, exact_seed)])
         return {"theta": theta.float(), "traj": traj.state_dict(), "exact": torch.arange(len(theta)) >= cut}
 
-    @staticmethod
-    def _without_noise(policy):
-        """The collect policy as the real data were driven (policies.ReplayPolicy.without_noise), or None."""
-        return policy.without_noise() if hasattr(policy, "without_noise") else None
-
     def summarize(self, ctx: RoundContext) -> dict:
-        collected = ctx.output("collect")
-        traj = Trajectories(**collected["traj"]).to(self.comp.device)
-        keep = ~traj.diverged
-        x = self.comp.summarizer(traj.select(keep)).cpu()
-        finite = torch.isfinite(x).all(1)
-        theta = collected["theta"][keep.cpu()][finite]
-        exact = collected.get("exact", torch.zeros(len(keep), dtype=torch.bool))[keep.cpu()][finite]
-        return {"theta": theta, "x": x[finite], "exact": exact,
-                "diverged": int((~keep).sum()) + int((~finite).sum())}
+        return summarized(ctx.output("collect"), self.comp.summarizer, self.comp.device)
 
     def identifiability(self, ctx: RoundContext) -> dict:
         """What the round's summaries can say about each parameter (diagnostics/identifiability.py): the linear read
@@ -149,48 +132,18 @@ class BayesSim(InferenceMethod):
         theta, x, _, _ = self._split(ctx.output("summarize"))
         d, names = self.comp.rc.diagnostics, self.comp.task.spec.names
         report = {**linear_read(x.to(self.comp.device), self._fitted_space(theta), names), "local": None}
-        for entry in report["trade_offs"]:
-            log.info("round %d: %s and %s are told apart only in part (held-out prediction errors correlate %+.2f)",
-                     ctx.round, *entry["pair"], entry["correlation"])
         if d.sensitivity_sims and ctx.round == 1:
-            report["local"] = local = sensitivity(lambda points: self._summaries_at(ctx, points), self._nominal(),
-                                                  column_scale(x.double()), names)
-            if local["no_effect"]:
-                log.warning("round 1: %s move no summary at the nominal parameters (local sensitivity): the data "
-                            "cannot identify them, and their posterior stays at the prior", ", ".join(local["no_effect"]))
-            for entry in local["collinear"]:
-                log.warning("round 1: %s and %s act alike at the nominal parameters (collinearity index %.0f): the data "
-                            "pin down a combination of them", *entry["pair"], entry["index"])
+            def simulate(points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+                return summaries_at(points, task=self.comp.task, sims=self.comp.sims,
+                                    policy=self.comp.policy(ctx.seed, ctx), prior_std=self.comp.prior.stddev,
+                                    num=d.sensitivity_sims, horizon=self.comp.rc.collect.horizon, seed=ctx.seed,
+                                    summarize=self._summaries)
+
+            report["local"] = sensitivity(simulate, nominal_point(self.comp.task.spec, self.comp.prior.stddev),
+                                          column_scale(x.double()), names)
+        log_findings(ctx.round, report)
         ctx.tb.identifiability(ctx.round, names, report)
         return report
-
-    def _nominal(self) -> torch.Tensor:
-        """The task's nominal parameters in units of the prior's standard deviation, kept a step inside the box."""
-        spec, std = self.comp.task.spec, self.comp.prior.stddev.double()
-        low, high = torch.as_tensor(spec.low) + STEP * std, torch.as_tensor(spec.high) - STEP * std
-        return torch.maximum(torch.minimum(torch.as_tensor(spec.nominal, dtype=torch.float64), high), low) / std
-
-    def _summaries_at(self, ctx: RoundContext, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """identifiability.sensitivity's simulations: `diagnostics.sensitivity_sims` action sequences and initial states
-        (the collect policy's where it acts open loop, uniform random actions otherwise), the same at every point of
-        points [K, D] (parameters in units of the prior's standard deviation): (summaries [K, M, F], kept [M])."""
-        m, horizon = self.comp.rc.diagnostics.sensitivity_sims, self.comp.rc.collect.horizon
-        policy, task = self.comp.policy(ctx.seed, ctx), self.comp.task
-        start = None
-        if hasattr(policy, "plan"):
-            policy, start = policy.plan(m)
-        actions = (policy.actions if isinstance(policy, OpenLoopPolicy) else
-                   (policy if hasattr(policy, "open_loop_actions") else RandomPolicy(task.action_dim, ctx.seed))
-                   .open_loop_actions(m, horizon))[:, :horizon]
-        if start is None:
-            start = task.reset_state(np.random.default_rng(ctx.seed), m)
-        k = len(points)
-        theta = points * self.comp.prior.stddev.double()
-        traj = self.comp.sims.rollout(theta.repeat_interleave(m, 0), OpenLoopPolicy(actions.repeat(k, 1, 1)), horizon,
-                                      ctx.seed, state={f: np.tile(v, (k,) + (1,) * (v.ndim - 1)) for f, v in start.items()})
-        x = self._summaries(traj).double().reshape(k, m, -1)
-        kept = ~traj.diverged.cpu().reshape(k, m).any(0) & torch.isfinite(x).all(-1).all(0)
-        return x, kept
 
     def fit(self, ctx: RoundContext) -> dict:
         r = ctx.round
@@ -206,7 +159,8 @@ class BayesSim(InferenceMethod):
         latest = torch.zeros(len(theta), dtype=torch.bool)
         latest[len(theta) - len(data[-1][0]):] = True
         # simulations replayed as the real data were driven are kept for the calibration alone
-        exact = torch.cat([self._exact_training_rows(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)])
+        fraction = self.comp.rc.diagnostics.held_out_fraction
+        exact = torch.cat([exact_training_rows(ctx.output("summarize", k), fraction) for k in self._fitted_rounds(ctx)])
         history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest,
                             calibration_only=exact if bool((exact & latest).any()) else None)
         ctx.tb.losses(r, history)
@@ -235,19 +189,8 @@ class BayesSim(InferenceMethod):
     def _fitted_prior(self) -> ParameterDistribution:
         return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
-    def _held_out_count(self, n: int) -> int:
-        return int(self.comp.rc.diagnostics.held_out_fraction * n)
-
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
-        """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
-        cut = len(summary["theta"]) - self._held_out_count(len(summary["theta"]))
-        return summary["theta"][:cut], summary["x"][:cut], summary["theta"][cut:], summary["x"][cut:]
-
-    def _exact_training_rows(self, summary: dict) -> torch.Tensor:
-        """[rows of _split's training part] bool: those replayed as the real data were driven (collect)."""
-        n = len(summary["theta"])
-        exact = summary.get("exact", torch.zeros(n, dtype=torch.bool))  # absent from rounds summarized before
-        return exact[: n - self._held_out_count(n)]
+        return split(summary, self.comp.rc.diagnostics.held_out_fraction)
 
     def _fitted_model(self, ctx: RoundContext):
         model = self.comp.model()
@@ -287,12 +230,8 @@ class BayesSim(InferenceMethod):
                                       self.comp.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
                                       alpha=d.mismatch_alpha, max_distance_ratio=d.mismatch_distance_ratio)
 
-            if self.cfg.replay_tempering:
-                out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
-                    condition_at, check, torch.diag(self.comp.prior.stddev.double() ** 2))
-            else:
-                out["posterior"] = condition_at(1.0)
-                first = result = check(out["posterior"])
+            out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
+                condition_at, check, torch.diag(self.comp.prior.stddev.double() ** 2), widen=self.cfg.replay_tempering)
             out["replay_check"], out["unwidened_replay_check"] = result.record(), first.record()
             ctx.tb.replays(ctx.round, result, list(self.comp.task.obs_names))
         out["dispersion"] = None if spreads[-1] is None else spreads[-1].record()
@@ -303,27 +242,18 @@ class BayesSim(InferenceMethod):
         """For products of n > 1 trajectories (the real ones; for the local check, those and one simulated): the
         temperature fitted on sets of n simulations at the round's held-out parameters (set_calibration.py);
         (1, None) for one trajectory or without sets."""
-        count = min(self.comp.rc.diagnostics.combination_sets, len(self._split(ctx.output("summarize"))[2]))
-        if n < 2 or count == 0:
+        d = self.comp.rc.diagnostics
+        theta = self._split(ctx.output("summarize"))[2][:d.combination_sets].double()
+        if n < 2 or len(theta) == 0:
             return 1.0, None
-        theta = self._split(ctx.output("summarize"))[2][:count].double()
         seed = stage_seed(ctx.run_seed, ctx.round, "product_temperature")  # its own stream, as the checks'
-        kept, x = self._simulate(ctx, theta.repeat_interleave(n, 0), seed)
-        ok = kept.reshape(count, n).all(1)
-        theta, x = theta[ok], x.reshape(count, n, -1)[ok]
-
-        draws = self.comp.rc.diagnostics.coverage_samples
-        products = [self._tempered_product(ctx, [model.conditional(x_i.float()) for x_i in x_set]) for x_set in x]
-
-        def levels_at(temperature: float) -> torch.Tensor:
-            generator = torch.Generator().manual_seed(seed)  # the same draws' stream at every temperature
-            return torch.tensor([own_level(product(temperature), t, draws, generator)
-                                 for product, t in zip(products, theta)], dtype=torch.float64)
-
-        tau, record = product_temperature(levels_at, self.comp.rc.diagnostics.levels)
+        tau, record = simulated_sets_temperature(
+            theta, n, lambda theta_sets: self._simulate(ctx, theta_sets, seed),
+            lambda x_set: self._tempered_product(ctx, [model.conditional(x_i.float()) for x_i in x_set]),
+            d.levels, d.coverage_samples, seed)
         if tau < 1:
             log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
-                     ctx.round, n, tau, len(theta))
+                     ctx.round, n, tau, record["sets"])
         return tau, record
 
     def _tempered_product(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
@@ -333,12 +263,8 @@ class BayesSim(InferenceMethod):
                                 self.probit)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """One trajectory at each theta [K, D] under the collect policy, driven as the real data were where it replays
-        them (collect): (kept [K]: neither diverged nor with a non-finite summary, summaries [K, F] in float64)."""
-        policy = self.comp.policy(seed, ctx)
-        traj = self.comp.sims.rollout(theta, self._without_noise(policy) or policy, self.comp.rc.collect.horizon, seed)
-        x = self._summaries(traj).double()
-        return ~traj.diverged.cpu() & torch.isfinite(x).all(-1), x
+        return simulate_as_driven(self.comp.sims, self.comp.policy(seed, ctx), theta, self.comp.rc.collect.horizon,
+                                  seed, self._summaries)
 
     def _summaries(self, traj: Trajectories) -> torch.Tensor:
         return self.comp.summarizer(traj.to(self.comp.device)).cpu()
@@ -359,19 +285,13 @@ class BayesSim(InferenceMethod):
                 "local_coverage": self._local_coverage(ctx, conditioned)}
 
     def _extrapolation(self, ctx: RoundContext, x_real: torch.Tensor) -> dict | None:
-        """diagnostics/extrapolation.py: the real summaries among the training simulations, in the parameters a
-        regression from the model's inputs predicts (None without held-out simulations or with
-        `diagnostics.extrapolation_alpha` 0)."""
+        """model_checks.extrapolation on the rounds the model is trained on (None without held-out simulations or
+        with `diagnostics.extrapolation_alpha` 0)."""
         alpha = self.comp.rc.diagnostics.extrapolation_alpha
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         if alpha == 0 or len(data[-1][3]) == 0:
             return None
-        model = self._fitted_model(ctx)
-        with torch.no_grad():
-            train = torch.cat([model.inputs(x_train) for _, x_train, _, _ in data])
-            theta = self._fitted_space(torch.cat([theta_train for theta_train, _, _, _ in data]))
-            return inputs_outside(model.inputs(x_real.reshape(-1, x_real.shape[-1])), train, theta,
-                                  model.inputs(data[-1][3]), alpha, seed=ctx.seed)
+        return extrapolation(self._fitted_model(ctx), data, self._fitted_space, x_real, alpha, ctx.seed)
 
     def _local_coverage(self, ctx: RoundContext, conditioned: dict) -> dict | None:
         """diagnostics/local_coverage.py with `diagnostics.local_sets` draws. The n real trajectories and the
@@ -390,27 +310,18 @@ class BayesSim(InferenceMethod):
         x_real = conditioned["x_real"].reshape(-1, conditioned["x_real"].shape[-1])
         tau, _ = self._product_temperature(ctx, model, len(x_real) + 1)
         seed = stage_seed(ctx.run_seed, ctx.round, "local_coverage")
-
-        def simulate(theta: torch.Tensor) -> tuple[torch.Tensor, list]:
-            kept, x = self._simulate(ctx, theta, seed)
-            return kept, [model.conditional(x_j.float()) for x_j in x[kept]]
-
-        real = [model.conditional(x.float()) for x in x_real]
-        return {**local_coverage(lambda conditionals: self._tempered_product(ctx, conditionals)(tau), real, simulate,
-                                 d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
+        return {**coverage_near_real(model, x_real, lambda theta: self._simulate(ctx, theta, seed),
+                                     lambda conditionals: self._tempered_product(ctx, conditionals)(tau),
+                                     d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
-        num = self.comp.rc.diagnostics.predictive_sims
+        num, horizon = self.comp.rc.diagnostics.predictive_sims, self.comp.rc.collect.horizon
         if num == 0:
             return None
-
-        def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
-            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), self.comp.rc.collect.horizon,
-                                          ctx.seed).to(self.comp.device)
-            x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
-            return x[torch.isfinite(x).all(1)]
-
-        return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, ctx.seed)
+        return predictive_distances(
+            lambda theta: predictive_summaries(self.comp.sims, self.comp.policy(ctx.seed, ctx), theta, horizon,
+                                               ctx.seed, self.comp.summarizer, self.comp.device),
+            x_real, posterior, self.comp.prior, num, ctx.seed)
 
     def guard(self, ctx: RoundContext) -> dict:
         """The guard's findings (diagnostics/guard.py) and what the round hands on to domain randomization
@@ -480,17 +391,6 @@ class BayesSim(InferenceMethod):
 
 def _round_name(r: int) -> str:
     return "the prior" if r == 0 else f"round {r}'s posterior"
-
-
-def _probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransform | None:
-    """parameter_space probit or auto: the transform, None where auto falls back to parameter units."""
-    try:
-        return ProbitTransform(prior)
-    except ValueError as exc:
-        if space == "auto":
-            log.info("method.parameter_space=auto: %s; fitting in parameter units", exc)
-            return None
-        raise ConfigError(f"method.parameter_space=probit: {exc}; set method.parameter_space=box (or auto)") from None
 
 
 def bayessim(cfg: BayesSimConfig, comp) -> BayesSim:

@@ -50,15 +50,17 @@ def model_error_temperature(check: ReplayCheck, prior_covariance: torch.Tensor) 
 
 
 def temper_to_replays(condition_at: Callable[[float], object], check: Callable[[object], ReplayCheck],
-                      prior_covariance: torch.Tensor,
-                      floor: float = TEMPERATURE_FLOOR) -> tuple[object, ReplayCheck, ReplayCheck, float, list[dict]]:
+                      prior_covariance: torch.Tensor, floor: float = TEMPERATURE_FLOOR,
+                      widen: bool = True) -> tuple[object, ReplayCheck, ReplayCheck, float, list[dict] | None]:
     """(posterior, the replayed check of the posterior before widening, that of the posterior returned,
-    temperature, one {temperature, min_p_value} per try).
+    temperature, one {temperature, min_p_value} per try; None with widen=False, which only checks).
 
     condition_at(tau): the posterior with its likelihood ratios raised to tau; check(posterior): the
     replayed check of that posterior; prior_covariance: [D, D] in parameter units."""
     posterior = condition_at(1.0)
     first = result = check(posterior)
+    if not widen:
+        return posterior, first, result, 1.0, None
     tries = [{"temperature": 1.0, "min_p_value": min(result.p_value)}]
     tau = model_error_temperature(first, prior_covariance)
     if tau < 1.0:

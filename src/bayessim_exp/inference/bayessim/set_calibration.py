@@ -25,7 +25,8 @@ from collections.abc import Callable, Sequence
 
 import torch
 
-from ...distributions.hpd import shares_inside
+from ...distributions.base import ParameterDistribution
+from ...distributions.hpd import own_level, shares_inside
 
 COARSE = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
 _FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the best coarse one
@@ -61,3 +62,25 @@ def product_temperature(levels_at: Callable[[float], torch.Tensor], levels: Sequ
     best = min([best, *(tau for tau in fine if COARSE[-1] <= tau <= 1)], key=key)
     return best, {"temperature": best, "sets": len(tried[best]),
                   "inside": {f"{tau:.4g}": shares_inside(values, levels) for tau, values in sorted(tried.items(), reverse=True)}}
+
+
+def simulated_sets_temperature(theta: torch.Tensor, n: int,
+                               simulate: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+                               product_of: Callable[[torch.Tensor], Callable[[float], ParameterDistribution]],
+                               levels: Sequence[float], draws: int, seed: int) -> tuple[float, dict]:
+    """`product_temperature` fitted on one set of n simulations at each of theta [K, D] (the round's held-out
+    parameters), sets with a failed simulation left out. simulate(theta [M, D]) -> (kept [M], summaries [M, F])
+    driven as the real data were; product_of(summaries [n, F]) -> the set's product posterior as a function of
+    the temperature; `draws` per set locate its own parameters' HPD level."""
+    count = len(theta)
+    kept, x = simulate(theta.repeat_interleave(n, 0))
+    ok = kept.reshape(count, n).all(1)
+    theta, x = theta[ok], x.reshape(count, n, -1)[ok]
+    products = [product_of(x_set) for x_set in x]
+
+    def levels_at(temperature: float) -> torch.Tensor:
+        generator = torch.Generator().manual_seed(seed)  # the same draws' stream at every temperature
+        return torch.tensor([own_level(product(temperature), t, draws, generator)
+                             for product, t in zip(products, theta)], dtype=torch.float64)
+
+    return product_temperature(levels_at, levels)

@@ -74,6 +74,19 @@ def dumps(obj: Any) -> bytes:
     return buffer.getvalue()
 
 
+def same_data(a: Any, b: Any) -> bool:
+    """Whether a and b are saved as the same data: one class, the same fields, equal tensors (an object and its
+    copy read back from a file)."""
+    tensors_a: dict[str, torch.Tensor] = {}
+    tensors_b: dict[str, torch.Tensor] = {}
+    try:
+        if _encode(a, tensors_a) != _encode(b, tensors_b):
+            return False
+    except TypeError:  # not data: the same only as itself
+        return a is b
+    return all(t.dtype == tensors_b[k].dtype and torch.equal(t, tensors_b[k]) for k, t in tensors_a.items())
+
+
 def save_state(obj: Any, path: str | Path) -> None:
     Path(path).write_bytes(dumps(obj))
 

@@ -58,7 +58,7 @@ def test_results_and_tensorboard_are_written(compose, tmp_path):
     for key in ("posterior_mean", "posterior_std", "log_prob_true_posterior", "log_prob_true_prior", "diverged",
                 "sim_trajectories", "train_loss", "val_loss", "seconds"):
         assert key in last
-    assert set(last["seconds"]) == {"real", "collect", "summarize", "identifiability", "fit", "condition", "model_check",
+    assert set(last["seconds"]) == {"real", "proposal", "collect", "summarize", "identifiability", "fit", "condition", "model_check",
                                     "guard", "score"}
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 

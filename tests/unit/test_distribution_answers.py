@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from bayessim_exp.distributions.base import NOT_GAUSSIAN
+from bayessim_exp.distributions.base import NOT_GAUSSIAN, ParameterDistribution
 from bayessim_exp.distributions.convert import as_parameter_distribution
 from bayessim_exp.distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from bayessim_exp.distributions.mixture import GaussianMixture, TruncatedMixture
@@ -103,13 +103,15 @@ def test_mixtures_give_their_gaussian_factor_where_they_have_one_component():
     assert one.as_gaussian_mixture() is one and truncated.as_gaussian_mixture() is None
 
 
-def test_a_truncated_prior_restricts_its_own_prior_only():
+def test_a_truncated_prior_restricts_its_own_prior_only_also_when_read_back_from_a_file(tmp_path):
     prior = BoxUniform(LOW, HIGH)
     posterior = TruncatedMixture(GaussianMixture(torch.zeros(1), torch.tensor([[5.0, 2.5]]), torch.eye(2)[None]),
                                  LOW, HIGH)
     proposal = TruncatedPrior(prior, posterior)
-    assert proposal.restricts(prior) and not proposal.restricts(BoxUniform(LOW, HIGH))
+    assert proposal.restricts(prior) and not proposal.restricts(BoxUniform(LOW, 2 * HIGH))
     assert not posterior.restricts(prior)
+    proposal.save(tmp_path / "proposal.pt")  # a resumed run reads the round's proposal from its artifact
+    assert ParameterDistribution.load(tmp_path / "proposal.pt").restricts(prior)
 
 
 def test_a_probit_posterior_gives_its_inner_distribution():

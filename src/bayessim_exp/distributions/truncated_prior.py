@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import torch
 
-from ..data_files import data_class
+from ..data_files import data_class, same_data
 from .base import ParameterDistribution
 from .probit import ProbitTransform
 from .rejection import sample_by_rejection
@@ -64,7 +64,7 @@ class TruncatedPrior(ParameterDistribution):
         return obj
 
     def restricts(self, prior: ParameterDistribution) -> bool:
-        return self.prior is prior
+        return self.prior is prior or same_data(self.prior, prior)  # the prior, or its copy read from an artifact
 
     def _in_region(self, theta: torch.Tensor) -> torch.Tensor:
         return self.posterior.log_prob(theta) >= self.threshold

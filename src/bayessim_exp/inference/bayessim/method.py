@@ -1,8 +1,8 @@
 """BayesSim (Ramos et al. 2019) as an inference method: simulate from a proposal, summarize, fit
 q(theta | x), condition on every real summary with the proposal's correction.
 
-Stages of a round: collect (parameters from the proposal, trajectories under the collect policy)
--> summarize -> identifiability (which parameters the summaries can pin down, diagnostics/identifiability.py)
+Stages of a round: proposal (what the round draws its parameters from, proposals.py) -> collect (parameters
+from the proposal, trajectories under the collect policy) -> summarize -> identifiability (which parameters the summaries can pin down, diagnostics/identifiability.py)
 -> fit (the posterior model, its spread calibrated and its coverage and gain measured on the round's own
 held-out simulations) -> condition (the posterior given all real trajectories,
 docs/statistics.md, widened until the real trajectories lie among its replays where the task can
@@ -72,39 +72,38 @@ class BayesSim(InferenceMethod):
     def __init__(self, cfg: BayesSimConfig, comp):
         self.cfg, self.comp = cfg, comp
         self.proposer = proposal_named(cfg.proposal)
-        self._proposals: dict[int, ParameterDistribution | None] = {}
         self.probit = probit_transform(cfg.parameter_space, comp.prior)
 
     def stages(self) -> list[Stage]:
         return [
-            Stage("collect", self.collect, transient=not self.comp.rc.collect.keep_trajectories),
+            Stage("proposal", self.propose),
+            Stage("collect", self.collect, inputs=("proposal",), transient=not self.comp.rc.collect.keep_trajectories),
             Stage("summarize", self.summarize, inputs=("collect",)),
             Stage("identifiability", self.identifiability, inputs=("summarize",)),
-            Stage("fit", self.fit, inputs=("summarize",)),
-            Stage("condition", self.condition, inputs=("real", "fit")),
-            Stage("model_check", self.model_check, inputs=("real", "summarize", "fit", "condition")),
-            Stage("guard", self.guard, inputs=("fit", "condition", "model_check")),
+            Stage("fit", self.fit, inputs=("proposal", "summarize")),
+            Stage("condition", self.condition, inputs=("real", "proposal", "fit")),
+            Stage("model_check", self.model_check, inputs=("real", "proposal", "summarize", "fit", "condition")),
+            Stage("guard", self.guard, inputs=("proposal", "fit", "condition", "model_check")),
         ]
 
-    # proposals -----------------------------------------------------------------------
+    # stages --------------------------------------------------------------------------
+    def propose(self, ctx: RoundContext) -> dict:
+        """Round r's proposal, built from what round r - 1 handed on (proposals.py): its name as results.json
+        records it ('prior' where the round falls back to the prior) and the distribution, None for the prior."""
+        r, proposal = ctx.round, None
+        if r > 1:
+            proposal = self.proposer.build(self._handed_on(ctx, r - 1),
+                                           ProposalInputs(r, self.comp.prior, self.probit, ctx.seed))
+        return {"name": "prior" if proposal is None else self.proposer.name, "proposal": proposal}
+
     def proposal(self, ctx: RoundContext) -> ParameterDistribution:
-        """The distribution round r draws its parameters from (proposals.py)."""
-        proposal = self._round_proposal(ctx)
+        """The proposal stage's distribution; the prior where it has none."""
+        proposal = ctx.output("proposal")["proposal"]
         return self.comp.prior if proposal is None else proposal
 
-    def proposal_name(self, ctx: RoundContext) -> str:
-        """The proposal round r really uses: 'prior' where it falls back to the prior."""
-        return "prior" if self._round_proposal(ctx) is None else self.proposer.name
+    def _proposal_name(self, ctx: RoundContext) -> str:
+        return ctx.output("proposal")["name"]
 
-    def _round_proposal(self, ctx: RoundContext) -> ParameterDistribution | None:
-        """Built once per round, with the round's seed whichever stage asks first; None: the prior."""
-        r = ctx.round
-        if r > 1 and r not in self._proposals:
-            inputs = ProposalInputs(r, self.comp.prior, self.probit, stage_seed(ctx.run_seed, r, "proposal"))
-            self._proposals[r] = self.proposer.build(self._handed_on(ctx, r - 1), inputs)
-        return self._proposals.get(r)
-
-    # stages --------------------------------------------------------------------------
     def collect(self, ctx: RoundContext) -> dict:
         """The round's simulations under the collect policy. Where that policy replays the real trajectories with
         noise, the last rows (twice the held-out share) replay them as they were executed: the pairs the spread is
@@ -329,7 +328,7 @@ class BayesSim(InferenceMethod):
         the previous round handed on (the prior before round 1)."""
         r, held_out, checked = ctx.round, ctx.output("fit")["held_out"] or {}, ctx.output("model_check")
         conditioned = ctx.output("condition")
-        baseline = "prior" if self.proposal_name(ctx) == "prior" else f"round's proposal ({self.proposal_name(ctx)})"
+        baseline = "prior" if self._proposal_name(ctx) == "prior" else f"round's proposal ({self._proposal_name(ctx)})"
         # real trajectories replayed, and the posterior widened by what the replays leave unexplained: that comparison
         # with simulations near the posterior stands in for the distance from the training ones (docs/statistics.md)
         widened_by_replays = self.cfg.replay_tempering and conditioned["replay_check"] is not None
@@ -375,7 +374,7 @@ class BayesSim(InferenceMethod):
             "train_loss": hist["train"][-1],
             "val_loss": hist["best_val"],
             "joint_spread": hist.get("joint_spread"),  # the common factor on the spread (models/spread.py)
-            "proposal": self.proposal_name(ctx),
+            "proposal": self._proposal_name(ctx),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],
             "identifiability": {k: v for k, v in ctx.output("identifiability").items() if k != "seconds"},

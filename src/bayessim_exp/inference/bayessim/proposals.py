@@ -33,7 +33,7 @@ class ProposalInputs:
     round: int
     prior: ParameterDistribution
     probit: ProbitTransform | None  # the transform the model is fitted in; None: parameter units
-    seed: int  # the round's own, whichever stage asks for the proposal first
+    seed: int  # the proposal stage's: stage_seed(run seed, round, "proposal")
 
 
 class Proposal:

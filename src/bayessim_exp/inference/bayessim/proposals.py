@@ -38,7 +38,8 @@ class ProposalInputs:
 
 class Proposal:
     """How rounds after the first draw their parameters: `build` answers round r's distribution, or None for the
-    prior (recorded as 'prior' in results.json), from what round r - 1 handed on."""
+    prior (recorded as 'prior' in results.json), from what round r - 1 handed on. The method's proposal stage
+    saves the distribution, so it must be made of data classes (data_files.py), as every posterior is."""
 
     name: ClassVar[str]  # method.proposal's value, recorded in results.json
     # whether a round's model trains on every round's simulations; SNPE-A's correction divides by one

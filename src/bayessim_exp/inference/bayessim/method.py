@@ -72,7 +72,7 @@ class BayesSim(InferenceMethod):
     def __init__(self, cfg: BayesSimConfig, comp):
         self.cfg, self.comp = cfg, comp
         self.proposer = proposal_named(cfg.proposal)
-        self.probit = probit_transform(cfg.parameter_space, comp.prior)
+        self.probit = None if cfg.parameter_space == "box" else probit_transform(cfg.parameter_space, comp.prior)
 
     def stages(self) -> list[Stage]:
         return [

@@ -16,9 +16,7 @@ PARAMETER_SPACES = ("auto", "probit", "box")
 
 
 def probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransform | None:
-    """The transform for `space`; None for box, and where auto falls back to parameter units."""
-    if space == "box":
-        return None
+    """parameter_space probit or auto: the transform, None where auto falls back to parameter units."""
     try:
         return ProbitTransform(prior)
     except ValueError as exc:

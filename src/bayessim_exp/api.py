@@ -143,7 +143,7 @@ class Run:
 
         r = round_index or len(self.results["rounds"])
         pipeline = Pipeline(self.config, self.path)
-        return pipeline.comp.method.posterior(RoundContext(pipeline.comp, pipeline.run_dir, r, pipeline.rc.seed, None))
+        return pipeline.method.posterior(RoundContext(pipeline.run_dir, r, pipeline.rc.seed, None))
 
 
 def load_run(path: str | Path, trusted: bool = False) -> Run:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import importlib
 from collections.abc import Callable
 from pathlib import Path
@@ -228,8 +229,14 @@ def option_defaults(group: str, name: str) -> dict:
 
 
 def build(group: str, cfg: DictConfig | dict, **deps: Any) -> Any:
+    return factory(group, cfg)(**deps)
+
+
+def factory(group: str, cfg: DictConfig | dict) -> Callable[..., Any]:
+    """The option's factory with its checked parameters bound: what builds the option many times (a model per
+    round, a policy per stage) parses its config, and reads its YAML defaults, once."""
     name, params = parse_params(group, cfg)
-    return entry(group, name).factory(params, **deps)
+    return functools.partial(entry(group, name).factory, params)
 
 
 def _type_name(tp: Any) -> str:

@@ -37,7 +37,7 @@ from ...models.base import column_scale
 from ...policies import OpenLoopPolicy, RandomPolicy
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
-from ..base import InferenceMethod, real_trajectories
+from ..base import InferenceMethod, MethodInputs, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition, tempered_product
 from .proposals import moment_matched
@@ -83,14 +83,14 @@ class BayesSimConfig:
 
 
 class BayesSim(InferenceMethod):
-    def __init__(self, cfg: BayesSimConfig, comp):
-        self.cfg, self.comp = cfg, comp
+    def __init__(self, cfg: BayesSimConfig, inputs: MethodInputs):
+        self.cfg, self.inputs = cfg, inputs
         self._proposals: dict[int, ParameterDistribution | None] = {}
-        self.probit = None if cfg.parameter_space == "box" else _probit_transform(cfg.parameter_space, comp.prior)
+        self.probit = None if cfg.parameter_space == "box" else _probit_transform(cfg.parameter_space, inputs.prior)
 
     def stages(self) -> list[Stage]:
         return [
-            Stage("collect", self.collect, transient=not self.comp.rc.collect.keep_trajectories),
+            Stage("collect", self.collect, transient=not self.inputs.rc.collect.keep_trajectories),
             Stage("summarize", self.summarize, inputs=("collect",)),
             Stage("identifiability", self.identifiability, inputs=("summarize",)),
             Stage("fit", self.fit, inputs=("summarize",)),
@@ -102,7 +102,7 @@ class BayesSim(InferenceMethod):
     # proposals -----------------------------------------------------------------------
     def proposal(self, ctx: RoundContext) -> ParameterDistribution:
         """The distribution round r draws its parameters from (see PROPOSALS)."""
-        return self.comp.prior if self.proposal_name(ctx) == "prior" else self._proposals[ctx.round]
+        return self.inputs.prior if self.proposal_name(ctx) == "prior" else self._proposals[ctx.round]
 
     def proposal_name(self, ctx: RoundContext) -> str:
         """The proposal round r really uses: `truncated` falls back to the prior when the previous round's
@@ -114,18 +114,18 @@ class BayesSim(InferenceMethod):
         if r not in self._proposals:
             previous = self._handed_on(ctx, r - 1)
             seed = stage_seed(ctx.run_seed, r, "proposal")  # fixed per round, whichever stage asks first
-            if previous is self.comp.prior:
+            if previous is self.inputs.prior:
                 self._proposals[r] = None
             elif self.cfg.proposal == "truncated":
                 try:
-                    self._proposals[r] = TruncatedPrior(self.comp.prior, previous, seed=seed)
+                    self._proposals[r] = TruncatedPrior(self.inputs.prior, previous, seed=seed)
                 except ValueError as exc:
                     log.warning("round %d: %s; simulating from the prior instead", r, exc)
                     self._proposals[r] = None
             elif self.cfg.proposal == "gaussian" and self.probit is not None:
                 self._proposals[r] = ProbitPosterior(moment_matched(previous.inner, seed=seed), self.probit)
             elif self.cfg.proposal == "gaussian":
-                self._proposals[r] = moment_matched(previous, self.comp.prior.low, self.comp.prior.high, seed=seed)
+                self._proposals[r] = moment_matched(previous, self.inputs.prior.low, self.inputs.prior.high, seed=seed)
             else:
                 self._proposals[r] = previous
         return "prior" if self._proposals[r] is None else self.cfg.proposal
@@ -136,16 +136,16 @@ class BayesSim(InferenceMethod):
         noise, the last rows (twice the held-out share) replay them as they were executed: the pairs the spread is
         calibrated on and the held-out pairs, drawn like the real data (docs/statistics.md, 'Simulations driven
         like the real system')."""
-        rc = self.comp.rc
+        rc = self.inputs.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
-        policy = self.comp.policy(ctx.seed, ctx)
+        policy = self.inputs.policy(ctx.seed, ctx)
         exact = self._without_noise(policy)
         n_exact = 0 if exact is None else 2 * self._held_out_count(len(theta))
         cut = len(theta) - n_exact
-        traj = self.comp.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)
+        traj = self.inputs.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)
         if n_exact:
             exact_seed = stage_seed(ctx.run_seed, ctx.round, "collect_exact")
-            traj = Trajectories.cat([traj, self.comp.sims.rollout(theta[cut:], exact, rc.collect.horizon, exact_seed)])
+            traj = Trajectories.cat([traj, self.inputs.sims.rollout(theta[cut:], exact, rc.collect.horizon, exact_seed)])
         return {"theta": theta.float(), "traj": traj.state_dict(), "exact": torch.arange(len(theta)) >= cut}
 
     @staticmethod
@@ -155,9 +155,9 @@ class BayesSim(InferenceMethod):
 
     def summarize(self, ctx: RoundContext) -> dict:
         collected = ctx.output("collect")
-        traj = Trajectories(**collected["traj"]).to(self.comp.device)
+        traj = Trajectories(**collected["traj"]).to(self.inputs.device)
         keep = ~traj.diverged
-        x = self.comp.summarizer(traj.select(keep)).cpu()
+        x = self.inputs.summarizer(traj.select(keep)).cpu()
         finite = torch.isfinite(x).all(1)
         theta = collected["theta"][keep.cpu()][finite]
         exact = collected.get("exact", torch.zeros(len(keep), dtype=torch.bool))[keep.cpu()][finite]
@@ -169,8 +169,8 @@ class BayesSim(InferenceMethod):
         of its training simulations, and in round 1 the local sensitivity at the nominal parameters, whose
         parameters that move nothing are said before any fit."""
         theta, x, _, _ = self._split(ctx.output("summarize"))
-        d, names = self.comp.rc.diagnostics, self.comp.task.spec.names
-        report = {**linear_read(x.to(self.comp.device), self._fitted_space(theta), names), "local": None}
+        d, names = self.inputs.rc.diagnostics, self.inputs.task.spec.names
+        report = {**linear_read(x.to(self.inputs.device), self._fitted_space(theta), names), "local": None}
         for entry in report["trade_offs"]:
             log.info("round %d: %s and %s are told apart only in part (held-out prediction errors correlate %+.2f)",
                      ctx.round, *entry["pair"], entry["correlation"])
@@ -188,7 +188,7 @@ class BayesSim(InferenceMethod):
 
     def _nominal(self) -> torch.Tensor:
         """The task's nominal parameters in units of the prior's standard deviation, kept a step inside the box."""
-        spec, std = self.comp.task.spec, self.comp.prior.stddev.double()
+        spec, std = self.inputs.task.spec, self.inputs.prior.stddev.double()
         low, high = torch.as_tensor(spec.low) + STEP * std, torch.as_tensor(spec.high) - STEP * std
         return torch.maximum(torch.minimum(torch.as_tensor(spec.nominal, dtype=torch.float64), high), low) / std
 
@@ -196,8 +196,8 @@ class BayesSim(InferenceMethod):
         """identifiability.sensitivity's simulations: `diagnostics.sensitivity_sims` action sequences and initial states
         (the collect policy's where it acts open loop, uniform random actions otherwise), the same at every point of
         points [K, D] (parameters in units of the prior's standard deviation): (summaries [K, M, F], kept [M])."""
-        m, horizon = self.comp.rc.diagnostics.sensitivity_sims, self.comp.rc.collect.horizon
-        policy, task = self.comp.policy(ctx.seed, ctx), self.comp.task
+        m, horizon = self.inputs.rc.diagnostics.sensitivity_sims, self.inputs.rc.collect.horizon
+        policy, task = self.inputs.policy(ctx.seed, ctx), self.inputs.task
         start = None
         if hasattr(policy, "plan"):
             policy, start = policy.plan(m)
@@ -207,8 +207,8 @@ class BayesSim(InferenceMethod):
         if start is None:
             start = task.reset_state(np.random.default_rng(ctx.seed), m)
         k = len(points)
-        theta = points * self.comp.prior.stddev.double()
-        traj = self.comp.sims.rollout(theta.repeat_interleave(m, 0), OpenLoopPolicy(actions.repeat(k, 1, 1)), horizon,
+        theta = points * self.inputs.prior.stddev.double()
+        traj = self.inputs.sims.rollout(theta.repeat_interleave(m, 0), OpenLoopPolicy(actions.repeat(k, 1, 1)), horizon,
                                       ctx.seed, state={f: np.tile(v, (k,) + (1,) * (v.ndim - 1)) for f, v in start.items()})
         x = self._summaries(traj).double().reshape(k, m, -1)
         kept = ~traj.diverged.cpu().reshape(k, m).any(0) & torch.isfinite(x).all(-1).all(0)
@@ -218,11 +218,11 @@ class BayesSim(InferenceMethod):
         r = ctx.round
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         theta, x = self._fitted_space(torch.cat([d[0] for d in data])), torch.cat([d[1] for d in data])
-        model = self.comp.model()
+        model = self.inputs.model()
         if r > 1 and self.cfg.finetune:
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
         # trained on the run's device (summaries are stored on the CPU; with device=cuda they are copied there)
-        dev = self.comp.device
+        dev = self.inputs.device
         # the spread is calibrated on the latest round's pairs, drawn like the pairs the posterior is used on:
         # one factor per parameter fitted to rounds pooled from several proposals would fit the wide early ones
         latest = torch.zeros(len(theta), dtype=torch.bool)
@@ -233,7 +233,7 @@ class BayesSim(InferenceMethod):
                             calibration_only=exact if bool((exact & latest).any()) else None)
         ctx.tb.losses(r, history)
         theta_val, x_val = data[-1][2], data[-1][3]
-        d = self.comp.rc.diagnostics
+        d = self.inputs.rc.diagnostics
         if len(theta_val) == 0:
             return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": None,
                     "held_out": None}
@@ -241,7 +241,7 @@ class BayesSim(InferenceMethod):
                                      seed=ctx.seed)
         over_prior = held_out_gain(model, self._fitted_space(theta_val), x_val, self._fitted_prior())
         # log q - log p~ = (log q - log p) - (log p~ - log p), the same in parameter units and in probit space
-        proposal_ratio = (self.proposal(ctx).log_prob(theta_val.double()) - self.comp.prior.log_prob(theta_val.double()))
+        proposal_ratio = (self.proposal(ctx).log_prob(theta_val.double()) - self.inputs.prior.log_prob(theta_val.double()))
         held_out = {"count": len(theta_val), "gain": over_prior,
                     "gain_over_proposal": over_prior - float(proposal_ratio.mean())}
         return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
@@ -255,10 +255,10 @@ class BayesSim(InferenceMethod):
         return theta if self.probit is None else self.probit.to_probit(theta).float()
 
     def _fitted_prior(self) -> ParameterDistribution:
-        return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
+        return self.inputs.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
     def _held_out_count(self, n: int) -> int:
-        return int(self.comp.rc.diagnostics.held_out_fraction * n)
+        return int(self.inputs.rc.diagnostics.held_out_fraction * n)
 
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
         """(theta, x) for training and (theta, x) held out for the coverage check (the last rows)."""
@@ -272,7 +272,7 @@ class BayesSim(InferenceMethod):
         return exact[: n - self._held_out_count(n)]
 
     def _fitted_model(self, ctx: RoundContext):
-        model = self.comp.model()
+        model = self.inputs.model()
         model.load_state_dict(ctx.output("fit")["model"])
         return model
 
@@ -285,7 +285,7 @@ class BayesSim(InferenceMethod):
 
         def condition_at(temperature: float):
             try:
-                post, spread = condition(model, x_real, self.comp.prior, self.cfg.max_components,
+                post, spread = condition(model, x_real, self.inputs.prior, self.cfg.max_components,
                                          proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
                                          combination=self.cfg.combination, temperature=product_tau * temperature)
             except ValueError as exc:
@@ -293,30 +293,30 @@ class BayesSim(InferenceMethod):
             spreads.append(spread)
             return post
 
-        d = self.comp.rc.diagnostics
-        replayable = d.replay_sims > 0 and self.comp.task.state_from_observation(
+        d = self.inputs.rc.diagnostics
+        replayable = d.replay_sims > 0 and self.inputs.task.state_from_observation(
             real.states[:1, 0].double().cpu().numpy()) is not None
         if d.replay_sims and not replayable:
             log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
-                     ctx.round, self.comp.task.name)
+                     ctx.round, self.inputs.task.name)
         out = {"x_real": x_real, "temperature": 1.0, "replay_check": None, "unwidened_replay_check": None,
                "tempering": None, "product_temperature": product_record}
         if not replayable:
             out["posterior"] = condition_at(1.0)
         else:
             def check(posterior):
-                return replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real, posterior,
-                                      self.comp.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
+                return replayed_check(lambda theta, which: replay(self.inputs.sims, theta, real, which), real, posterior,
+                                      self.inputs.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
                                       alpha=d.mismatch_alpha, max_distance_ratio=d.mismatch_distance_ratio)
 
             if self.cfg.replay_tempering:
                 out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
-                    condition_at, check, torch.diag(self.comp.prior.stddev.double() ** 2))
+                    condition_at, check, torch.diag(self.inputs.prior.stddev.double() ** 2))
             else:
                 out["posterior"] = condition_at(1.0)
                 first = result = check(out["posterior"])
             out["replay_check"], out["unwidened_replay_check"] = result.record(), first.record()
-            ctx.tb.replays(ctx.round, result, list(self.comp.task.obs_names))
+            ctx.tb.replays(ctx.round, result, list(self.inputs.task.obs_names))
         out["dispersion"] = None if spreads[-1] is None else spreads[-1].record()
         out["temperature"] *= product_tau
         return out
@@ -325,7 +325,7 @@ class BayesSim(InferenceMethod):
         """For products of n > 1 trajectories (the real ones; for the local check, those and one simulated): the
         temperature fitted on sets of n simulations at the round's held-out parameters (set_calibration.py);
         (1, None) for one trajectory or without sets."""
-        count = min(self.comp.rc.diagnostics.combination_sets, len(self._split(ctx.output("summarize"))[2]))
+        count = min(self.inputs.rc.diagnostics.combination_sets, len(self._split(ctx.output("summarize"))[2]))
         if n < 2 or count == 0:
             return 1.0, None
         theta = self._split(ctx.output("summarize"))[2][:count].double()
@@ -334,7 +334,7 @@ class BayesSim(InferenceMethod):
         ok = kept.reshape(count, n).all(1)
         theta, x = theta[ok], x.reshape(count, n, -1)[ok]
 
-        draws = self.comp.rc.diagnostics.coverage_samples
+        draws = self.inputs.rc.diagnostics.coverage_samples
         products = [self._tempered_product(ctx, [model.conditional(x_i.float()) for x_i in x_set]) for x_set in x]
 
         def levels_at(temperature: float) -> torch.Tensor:
@@ -342,7 +342,7 @@ class BayesSim(InferenceMethod):
             return torch.tensor([own_level(product(temperature), t, draws, generator)
                                  for product, t in zip(products, theta)], dtype=torch.float64)
 
-        tau, record = product_temperature(levels_at, self.comp.rc.diagnostics.levels)
+        tau, record = product_temperature(levels_at, self.inputs.rc.diagnostics.levels)
         if tau < 1:
             log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
                      ctx.round, n, tau, len(theta))
@@ -351,19 +351,19 @@ class BayesSim(InferenceMethod):
     def _tempered_product(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
         """The posterior given trajectories' per-trajectory posteriors, combined as the product tempered to the
         temperature it is called with (their product computed once)."""
-        return tempered_product(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
+        return tempered_product(conditionals, self.inputs.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
                                 self.probit)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
         """One trajectory at each theta [K, D] under the collect policy, driven as the real data were where it replays
         them (collect): (kept [K]: neither diverged nor with a non-finite summary, summaries [K, F] in float64)."""
-        policy = self.comp.policy(seed, ctx)
-        traj = self.comp.sims.rollout(theta, self._without_noise(policy) or policy, self.comp.rc.collect.horizon, seed)
+        policy = self.inputs.policy(seed, ctx)
+        traj = self.inputs.sims.rollout(theta, self._without_noise(policy) or policy, self.inputs.rc.collect.horizon, seed)
         x = self._summaries(traj).double()
         return ~traj.diverged.cpu() & torch.isfinite(x).all(-1), x
 
     def _summaries(self, traj: Trajectories) -> torch.Tensor:
-        return self.comp.summarizer(traj.to(self.comp.device)).cpu()
+        return self.inputs.summarizer(traj.to(self.inputs.device)).cpu()
 
     def model_check(self, ctx: RoundContext) -> dict:
         """Can the simulator, at parameters the posterior allows, reproduce the real data? The summary
@@ -371,7 +371,7 @@ class BayesSim(InferenceMethod):
         place among the simulated ones, the replayed check (condition) and the dispersion. And does the model
         know the real data: do they lie among its training simulations, is it calibrated there (the guard reads
         `extrapolation` and `local_coverage`)?"""
-        d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
+        d, conditioned = self.inputs.rc.diagnostics, ctx.output("condition")
         _, x_train, _, x_held = self._split(ctx.output("summarize"))
         outside = summaries_outside(conditioned["x_real"], x_train, x_held)
         return {"predictive_distance": self._predictive(ctx, conditioned["posterior"], conditioned["x_real"]),
@@ -384,7 +384,7 @@ class BayesSim(InferenceMethod):
         """diagnostics/extrapolation.py: the real summaries among the training simulations, in the parameters a
         regression from the model's inputs predicts (None without held-out simulations or with
         `diagnostics.extrapolation_alpha` 0)."""
-        alpha = self.comp.rc.diagnostics.extrapolation_alpha
+        alpha = self.inputs.rc.diagnostics.extrapolation_alpha
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         if alpha == 0 or len(data[-1][3]) == 0:
             return None
@@ -401,7 +401,7 @@ class BayesSim(InferenceMethod):
         sets (_product_temperature), so the check finds what is wrong near the real data beyond what products
         get wrong on average (the handed-on posterior is widened for that already). No replay widening: the
         simulations have no model error."""
-        d = self.comp.rc.diagnostics
+        d = self.inputs.rc.diagnostics
         if d.local_sets == 0:
             return None
         if conditioned["posterior"].effective_sample_size is not None:  # each draw's posterior would be sampled too
@@ -422,17 +422,17 @@ class BayesSim(InferenceMethod):
                                  d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
-        num = self.comp.rc.diagnostics.predictive_sims
+        num = self.inputs.rc.diagnostics.predictive_sims
         if num == 0:
             return None
 
         def simulate_summaries(theta: torch.Tensor) -> torch.Tensor:
-            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed, ctx), self.comp.rc.collect.horizon,
-                                          ctx.seed).to(self.comp.device)
-            x = self.comp.summarizer(traj.select(~traj.diverged)).cpu()
+            traj = self.inputs.sims.rollout(theta, self.inputs.policy(ctx.seed, ctx), self.inputs.rc.collect.horizon,
+                                          ctx.seed).to(self.inputs.device)
+            x = self.inputs.summarizer(traj.select(~traj.diverged)).cpu()
             return x[torch.isfinite(x).all(1)]
 
-        return predictive_distances(simulate_summaries, x_real, posterior, self.comp.prior, num, ctx.seed)
+        return predictive_distances(simulate_summaries, x_real, posterior, self.inputs.prior, num, ctx.seed)
 
     def guard(self, ctx: RoundContext) -> dict:
         """The guard's findings (diagnostics/guard.py) and what the round hands on to domain randomization
@@ -463,7 +463,7 @@ class BayesSim(InferenceMethod):
 
     def _handed_on(self, ctx: RoundContext, r: int) -> ParameterDistribution:
         source = self._handed_on_round(ctx, r)
-        return self.comp.prior if source == 0 else ctx.output("condition", source)["posterior"]
+        return self.inputs.prior if source == 0 else ctx.output("condition", source)["posterior"]
 
     # results -------------------------------------------------------------------------
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
@@ -479,7 +479,7 @@ class BayesSim(InferenceMethod):
         summary, fitted, conditioned, guard = (ctx.output(s) for s in ("summarize", "fit", "condition", "guard"))
         hist = fitted["history"]
         return {
-            "sim_trajectories": self.comp.rc.collect.trajectories,
+            "sim_trajectories": self.inputs.rc.collect.trajectories,
             "train_set_size": fitted["num_train"],
             "diverged": summary["diverged"],
             "epochs": hist["epochs"],
@@ -515,5 +515,5 @@ def _probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransfo
         raise ConfigError(f"method.parameter_space=probit: {exc}; set method.parameter_space=box (or auto)") from None
 
 
-def bayessim(cfg: BayesSimConfig, comp) -> BayesSim:
-    return BayesSim(cfg, comp)
+def bayessim(cfg: BayesSimConfig, inputs: MethodInputs) -> BayesSim:
+    return BayesSim(cfg, inputs)

@@ -12,7 +12,9 @@ The pipeline owns the loop, seeds, artifacts and logging; a method contributes
     stop_reason(ctx) why the run must stop after this round (its results written), or None
 
 Methods are a config group (`method=bayessim`); a researcher's own is registered with
-`registry.register("method", name, ConfigDataclass)` on a factory `(cfg, inputs: MethodInputs) -> InferenceMethod`.
+`registry.register("method", name, ConfigDataclass)` on a factory `(cfg, inputs: MethodInputs) -> InferenceMethod`,
+and with `posterior=` a reader `(ctx, prior)` of a finished round's distribution from its artifacts alone, which
+`api.load_run(...).posterior()` uses without building simulators.
 """
 
 from __future__ import annotations

@@ -68,7 +68,7 @@ class SimOpt(InferenceMethod):
             raise PosteriorError(f"round {round_index}: SimOpt's Gaussian: {exc}") from exc
 
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
-        return ctx.output("search")["posterior"]
+        return searched(ctx, self.inputs.prior)
 
     def record(self, ctx: RoundContext) -> dict:
         out = ctx.output("search")
@@ -83,3 +83,8 @@ class SimOpt(InferenceMethod):
 
 def simopt(cfg: SimOptConfig, inputs: MethodInputs) -> SimOpt:
     return SimOpt(cfg, inputs)
+
+
+def searched(ctx: RoundContext, prior: ParameterDistribution) -> ParameterDistribution:
+    """The round's final Gaussian, truncated to the prior's box, from its search artifact (registry: posterior)."""
+    return ctx.output("search")["posterior"]

@@ -85,7 +85,7 @@ class Sysid(InferenceMethod):
         }
 
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
-        return ctx.output("fit")["posterior"]
+        return fitted(ctx, self.inputs.prior)
 
     def record(self, ctx: RoundContext) -> dict:
         out = ctx.output("fit")
@@ -110,3 +110,9 @@ class Sysid(InferenceMethod):
 
 def sysid(cfg: SysidConfig, inputs: MethodInputs) -> Sysid:
     return Sysid(cfg, inputs)
+
+
+def fitted(ctx: RoundContext, prior: ParameterDistribution) -> ParameterDistribution:
+    """The round's Gaussian around its estimate (or the prior it handed on), from its fit artifact (registry:
+    posterior)."""
+    return ctx.output("fit")["posterior"]

@@ -25,29 +25,31 @@ from omegaconf import OmegaConf
 
 from bayessim_exp import registry
 from bayessim_exp.artifacts import RunDir
-from bayessim_exp.components import build_components
+from bayessim_exp.components import Components, build_components, build_method
 from bayessim_exp.diagnostics.extrapolation import inputs_outside
 from bayessim_exp.distributions.hpd import own_level
 from bayessim_exp.inference.bayessim.condition import condition
+from bayessim_exp.inference.bayessim.method import BayesSim
 from bayessim_exp.run_config import check_run_config
 from bayessim_exp.stages import RoundContext
 
 
-def coverage(comp, ctx: RoundContext, model, theta: torch.Tensor, seed: int) -> tuple[dict, torch.Tensor]:
+def coverage(comp: Components, method: BayesSim, ctx: RoundContext, model, theta: torch.Tensor,
+             seed: int) -> tuple[dict, torch.Tensor]:
     """Shares of theta's rows inside their own posterior's 50 % / 90 % regions, one trajectory each; the summaries."""
     traj = comp.sims.rollout(theta, comp.policy(seed, ctx), comp.rc.collect.horizon, seed)
     x = comp.summarizer(traj.to(comp.device)).cpu()
     kept = ~traj.diverged.cpu() & torch.isfinite(x).all(-1)
-    proposal = comp.method.proposal(ctx)
+    proposal = method.proposal(ctx)
     generator = torch.Generator().manual_seed(seed)
     levels = torch.tensor([own_level(condition(model, x_i, comp.prior, proposal=proposal, seed=seed,
-                                               probit=comp.method.probit)[0], t.double(), 500, generator)
+                                               probit=method.probit)[0], t.double(), 500, generator)
                            for t, x_i in zip(theta[kept], x[kept])])
     return {f"{level:g}": float((levels < level).double().mean()) for level in (0.5, 0.9)}, x[kept]
 
 
-def fitted_space(comp, theta: torch.Tensor) -> torch.Tensor:
-    return theta if comp.method.probit is None else comp.method.probit.to_probit(theta).float()
+def fitted_space(method: BayesSim, theta: torch.Tensor) -> torch.Tensor:
+    return theta if method.probit is None else method.probit.to_probit(theta).float()
 
 
 def refit(comp, cfg, overrides: list[str], theta: torch.Tensor, x: torch.Tensor):
@@ -70,10 +72,11 @@ def main() -> None:
     comp = build_components(cfg, check_run_config(cfg))
     if comp.real.true_params is None:
         raise SystemExit(f"{args.run}: the run's real data carry no true parameters")
-    ctx = RoundContext(comp, RunDir(args.run), args.round, comp.rc.seed, None)
+    method = build_method(cfg, comp, comp.policy)
+    ctx = RoundContext(RunDir(args.run), args.round, comp.rc.seed, None)
     summaries = [ctx.output("summarize", k) for k in range(1, args.round + 1)]
     cut = [len(s["x"]) - int(comp.rc.diagnostics.held_out_fraction * len(s["x"])) for s in summaries]
-    theta_train = fitted_space(comp, torch.cat([s["theta"][:c] for s, c in zip(summaries, cut)]))
+    theta_train = fitted_space(method, torch.cat([s["theta"][:c] for s, c in zip(summaries, cut)]))
     x_train = torch.cat([s["x"][:c] for s, c in zip(summaries, cut)])
     if args.refit:
         model = refit(comp, cfg, args.refit, theta_train, x_train)
@@ -81,9 +84,9 @@ def main() -> None:
         model = comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
     truth = torch.as_tensor(comp.real.true_params, dtype=torch.float64)
-    at_truth, x_truth = coverage(comp, ctx, model, truth[None].repeat(args.sims, 1), args.seed)
+    at_truth, x_truth = coverage(comp, method, ctx, model, truth[None].repeat(args.sims, 1), args.seed)
     drawn = comp.prior.sample((args.sims,), generator=torch.Generator().manual_seed(args.seed)).double()
-    at_prior, _ = coverage(comp, ctx, model, drawn, args.seed + 1)
+    at_prior, _ = coverage(comp, method, ctx, model, drawn, args.seed + 1)
 
     with torch.no_grad():
         outside = inputs_outside(model.inputs(x_truth), model.inputs(x_train), theta_train,

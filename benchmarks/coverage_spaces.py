@@ -37,6 +37,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from bayessim_exp import api
+    from bayessim_exp.components import build_components
     from bayessim_exp.diagnostics.coverage import credibility_ranks
     from bayessim_exp.distributions.hpd import hpd_level
     from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
@@ -50,11 +51,12 @@ def main() -> None:
     # artifacts this run just wrote (pipeline.RunDir), not files from elsewhere
     fitted = torch.load(args.out / "round_001" / "fit.pt", weights_only=False)
     summaries = torch.load(args.out / "round_001" / "summarize.pt", weights_only=False)
-    model = pipeline.comp.model()
+    comp = build_components(cfg, pipeline.rc)
+    model = comp.model()
     model.load_state_dict(fitted["model"])
-    probit = ProbitTransform(pipeline.comp.prior)
+    probit = ProbitTransform(comp.prior)
     if args.exact_replays:
-        theta, x = exact_replays(pipeline, args.out, args.pairs, args.seed)
+        theta, x = exact_replays(comp, args.out, args.pairs, args.seed)
     else:
         held_out = int(cfg.diagnostics.held_out_fraction * len(summaries["theta"]))
         theta = summaries["theta"][-held_out:][: args.pairs].double()
@@ -76,12 +78,11 @@ def main() -> None:
         print(f"| HPD {level:.0%} | {(in_probit < level).mean():.3f} | {(in_parameters < level).mean():.3f} |")
 
 
-def exact_replays(pipeline, out: Path, count: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+def exact_replays(comp, out: Path, count: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
     """count prior draws and the summaries of their simulations replaying round 1's real trajectories without noise."""
     from bayessim_exp.policies import ReplayPolicy, ReplayPolicyConfig
     from bayessim_exp.sim.trajectories import Trajectories
 
-    comp = pipeline.comp
     recorded = Trajectories(**torch.load(out / "round_001" / "real.pt", weights_only=False)["traj"])
     theta = comp.prior.sample((count,), generator=torch.Generator().manual_seed(seed)).double()
     replays = comp.sims.rollout(theta, ReplayPolicy(ReplayPolicyConfig(0.0), recorded, comp.task, seed),

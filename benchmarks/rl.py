@@ -27,7 +27,7 @@ def components(task: str, overrides: list[str], steps: int | None = None):
     """The task's run with rl=ppo; PPO's total_steps (`steps`, else the configured budget) rounded up to whole
     batches, which PPO's config requires."""
     from bayessim_exp import api
-    from bayessim_exp.components import build_components
+    from bayessim_exp.components import build_components, build_rl
     from bayessim_exp.run_config import check_run_config
 
     cfg = api.compose([f"task={task}", "rl=ppo", "rl.train_on=nominal", *overrides])
@@ -35,7 +35,7 @@ def components(task: str, overrides: list[str], steps: int | None = None):
     batch = train.num_envs * train.rollout_steps
     train.total_steps = -(-(steps or train.total_steps) // batch) * batch
     comp = build_components(cfg, check_run_config(cfg))
-    return comp, comp.rl
+    return comp, build_rl(cfg, comp, lambda ctx: comp.prior)  # train_on=nominal asks for no distribution
 
 
 def throughput(task: str, steps: int, overrides: list[str]) -> dict:

@@ -58,8 +58,8 @@ def main() -> None:
             cfg = api.compose(overrides + rl_overrides + [f"rl.train_on={train_on}"])
             results.setdefault("settings", settings(cfg, run_dir))
             comp = build_components(cfg, check_run_config(cfg))
-            ctx = StandaloneRounds(comp, posterior, run_dir / f"ppo_{train_on}").run_round(1)
-            row[train_on] = comp.rl.record(ctx)
+            rounds = StandaloneRounds(cfg, comp, posterior, run_dir / f"ppo_{train_on}")
+            row[train_on] = rounds.rl.record(rounds.run_round(1))
             print(f"seed {seed} {train_on:>9s}: surrogate real return {row[train_on]['surrogate_real_return']['mean']:.1f} "
                   f"({row[train_on]['rl_training']['seconds']:.0f} s of PPO)", flush=True)
         results["runs"].append(row)

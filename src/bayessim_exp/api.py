@@ -121,13 +121,18 @@ class Run:
     config: Any
 
     def posterior(self, round_index: int | None = None) -> ParameterDistribution:
-        """The distribution a finished round ended with (the last round by default)."""
-        from .pipeline import Pipeline
+        """The distribution a finished round ended with (the last round by default), read by the method's reader
+        (registry: posterior) from the round's artifacts and the prior: no simulator, summarizer or model is built."""
+        from .run_config import check_run_config
         from .stages import RoundContext
 
         r = round_index or len(self.results["rounds"])
-        pipeline = Pipeline(self.config, self.path)
-        return pipeline.comp.method.posterior(RoundContext(pipeline.comp, pipeline.run_dir, r, pipeline.rc.seed, None))
+        rc = check_run_config(self.config)
+        registry.load_plugins(rc.plugins)
+        task = registry.build("task", self.config.task)
+        prior = registry.build("prior", self.config.prior, spec=task.spec)
+        read = registry.posterior_reader(self.config.method.name)
+        return read(RoundContext(RunDir(self.path), r, rc.seed, None), prior)
 
 
 def load_run(path: str | Path, trusted: bool = False) -> Run:

@@ -1,9 +1,16 @@
-"""Every component of a run, built and checked from the config before anything is simulated."""
+"""A run's objects, built and checked from the config before anything is simulated, and the pieces that wire them.
+
+The pipeline (like StandaloneRounds and the benchmarks) builds these and hands each object to what uses it:
+the RL component gets the round's distribution as a callable, the inference method a MethodInputs, the collect
+policy the RL component's actor. Components is only the build's result, unpacked here: no stage sees it.
+"""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+import functools
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import torch
 from omegaconf import DictConfig
@@ -11,51 +18,62 @@ from omegaconf import DictConfig
 from . import registry
 from .distributions.base import ParameterDistribution
 from .errors import ConfigError
-from .inference.base import InferenceMethod
+from .inference.base import InferenceMethod, MethodInputs, PolicyFactory
+from .models.base import PosteriorModel
 from .real import RealSource
-from .rl.base import RLComponent
 from .run_config import RunConfig
+from .sim.base import Policy
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
+from .stages import RoundContext
 from .summarizers.base import Summarizer
 from .tasks.base import Task
 
+if TYPE_CHECKING:
+    from .rl.base import RLComponent
 
-@dataclasses.dataclass
+
+def _no_actor(ctx: RoundContext) -> torch.nn.Module | None:
+    return None
+
+
+@dataclasses.dataclass(frozen=True)
+class CollectPolicies:
+    """The collect policy, seeded; within a round (ctx) `rl`/`rl_randomized` act with `actor(ctx)`, the RL
+    component's latest trained actor, and `replay` replays the real trajectories recorded so far."""
+
+    build: Callable[..., Policy]  # the policy option's factory, its config parsed once
+    task: Task
+    actor: Callable[[RoundContext], torch.nn.Module | None] = _no_actor
+
+    def __call__(self, seed: int, ctx: RoundContext | None = None) -> Policy:
+        actor = self.actor(ctx) if ctx is not None else None
+        recorded = Trajectories(**ctx.output("real")["traj"]) if ctx is not None and ctx.has("real") else None
+        return self.build(action_dim=self.task.action_dim, seed=seed, control_dt=self.task.cfg.control_dt,
+                          actor=actor, recorded=recorded, task=self.task)
+
+
+@dataclasses.dataclass(frozen=True)
 class Components:
-    cfg: DictConfig
+    """What a run simulates and observes; the RL component and the inference method are built from these."""
+
     rc: RunConfig
     task: Task
     prior: ParameterDistribution
     sims: SimulatorPool
     summarizer: Summarizer
     real: RealSource
-    x_dim: int
-    method: InferenceMethod | None = None  # built last: a method may use every other component
-    rl: RLComponent | None = None  # None: rl=none
+    x_dim: int  # the summarizer's output width for this task and horizon
+    model: Callable[[], PosteriorModel]  # a fresh posterior model q(theta | x) for this task and summarizer
+    policy: CollectPolicies  # without an actor: the pipeline gives it the RL component's
 
     @property
     def device(self) -> torch.device:
         return torch.device(self.rc.device)
 
-    def policy(self, seed: int, ctx=None):
-        """The collect policy, seeded; within a round (ctx) `rl`/`rl_randomized` act with the latest trained
-        actor and `replay` replays the real trajectories recorded so far."""
-        actor = self.rl.actor(ctx) if self.rl is not None and ctx is not None else None
-        recorded = Trajectories(**ctx.output("real")["traj"]) if ctx is not None and ctx.has("real") else None
-        return registry.build("policy", self.cfg.policy, action_dim=self.task.action_dim, seed=seed,
-                              control_dt=self.task.cfg.control_dt, actor=actor, recorded=recorded, task=self.task)
-
-    def model(self):
-        """A fresh posterior model q(theta | x) for this task and summarizer."""
-        deps: dict[str, Any] = {"theta_dim": self.task.spec.dim, "x_dim": self.x_dim}
-        if getattr(self.summarizer, "embedding", None) is not None:
-            deps["embedding"] = self.summarizer.embedding
-        return registry.build("model", self.cfg.model, **deps)
-
 
 def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
-    """Build and check every component; all config errors surface here, before any simulation."""
+    """Build and check every component but the RL component and the method (build_rl, the pipeline)."""
     for group in registry.GROUPS:
         if group not in cfg:
             raise ConfigError(f"config has no {group!r} group; allowed: {', '.join(registry.names(group))}")
@@ -65,13 +83,26 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     summarizer = registry.build("summarizer", cfg.summarizer)
     summarizer.check(rc.collect.horizon)
     x_dim = summarizer.output_dim(task.obs_dim, task.action_dim, rc.collect.horizon)
-    registry.parse_params("policy", cfg.policy)
-    registry.parse_params("model", cfg.model)
+    policy = CollectPolicies(registry.factory("policy", cfg.policy), task)
+    embedding = getattr(summarizer, "embedding", None)
+    model = functools.partial(registry.factory("model", cfg.model), theta_dim=task.spec.dim, x_dim=x_dim,
+                              **({} if embedding is None else {"embedding": embedding}))
     real = registry.build("real", cfg.real, task=task, sims=sims, prior=prior, seed=rc.seed)
     real.check(rc.collect.horizon)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)
-    comp = Components(cfg, rc, task, prior, sims, summarizer, real, x_dim)
-    comp.rl = registry.build("rl", cfg.rl, comp=comp)
-    comp.method = registry.build("method", cfg.method, comp=comp)
-    return comp
+    return Components(rc, task, prior, sims, summarizer, real, x_dim, model, policy)
+
+
+def build_rl(cfg: DictConfig, comp: Components,
+             distribution: Callable[[RoundContext], ParameterDistribution]) -> RLComponent:
+    """The RL component (rl=none: one without stages); `distribution(ctx)` is the round's distribution to train on."""
+    return registry.build("rl", cfg.rl, task=comp.task, sims=comp.sims, device=comp.device, prior=comp.prior,
+                          true_params=comp.real.true_params, distribution=distribution)
+
+
+def build_method(cfg: DictConfig, comp: Components, policy: PolicyFactory) -> InferenceMethod:
+    """The inference method, handed what it uses; `policy`: the collect policy (a pipeline's acts with the RL
+    component's actor)."""
+    inputs = MethodInputs(comp.task, comp.prior, comp.sims, comp.summarizer, comp.rc, comp.device, comp.model, policy)
+    return registry.build("method", cfg.method, inputs=inputs)

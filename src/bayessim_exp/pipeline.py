@@ -3,13 +3,19 @@
 Each round: `real` records new real trajectories (kept raw across rounds), the inference method's
 stages turn simulations and real data into a new distribution over the parameters (BayesSim:
 collect -> summarize -> fit -> condition), `score` measures it against the prior and the true
-parameters when known, then the RL component's stages (if any) train and evaluate a policy on it.
+parameters when known, then the RL component's stages (none with rl=none) train and evaluate a policy on it.
 Every stage writes its artifact atomically before the next starts; a rerun in the same dir skips
 what is there. results.json is rewritten after every round.
+
+The pipeline builds each object and hands it to those that use it: the components (components.py), then the
+RL component with the round's distribution as a callable (the method's posterior, bound late), then the
+method with a MethodInputs whose collect policy acts with the RL component's actor. A stage reaches its
+dependencies through the object it belongs to; its context (stages.RoundContext) holds only the round.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -18,9 +24,11 @@ from omegaconf import DictConfig, OmegaConf
 
 from . import registry
 from .artifacts import RunDir
-from .components import Components, build_components
+from .components import CollectPolicies, build_components, build_method, build_rl
 from .diagnostics.scoring import score
+from .distributions.base import ParameterDistribution
 from .errors import ConfigError, PosteriorError
+from .inference.base import InferenceMethod
 from .run_config import check_run_config
 from .sim.trajectories import Trajectories
 from .stages import RoundContext, Stage, check_stages, run_stage
@@ -31,12 +39,16 @@ class Pipeline:
         self.cfg = cfg
         self.rc = check_run_config(cfg)
         registry.load_plugins(self.rc.plugins)
-        self.comp: Components = build_components(cfg, self.rc)
+        comp = build_components(cfg, self.rc)  # every config error surfaces here or below, before any simulation
+        self.task, self.prior, self.real_source = comp.task, comp.prior, comp.real
+        self.rl = build_rl(cfg, comp, self._posterior)
+        self.policy: CollectPolicies = dataclasses.replace(comp.policy, actor=self.rl.actor)
+        self.method: InferenceMethod = build_method(cfg, comp, self.policy)
         self.run_dir = RunDir(out_dir)
         self.run_dir.bind_config(cfg)
-        self.run_dir.bind_fingerprint("real data", self.comp.real.fingerprint)
-        self.stages = [Stage("real", self.real), *self.comp.method.stages(), Stage("score", self.score),
-                       *(self.comp.rl.stages() if self.comp.rl is not None else [])]
+        self.run_dir.bind_fingerprint("real data", self.real_source.fingerprint)
+        self.stages = [Stage("real", self.real), *self.method.stages(), Stage("score", self.score),
+                       *self.rl.stages()]
         check_stages(self.stages)
         self._tb = None
 
@@ -49,10 +61,14 @@ class Pipeline:
             self._tb.config(OmegaConf.to_yaml(self.cfg, resolve=True))
         return self._tb
 
+    def _posterior(self, ctx: RoundContext) -> ParameterDistribution:
+        """The round's distribution, for the RL component (built before the method it asks)."""
+        return self.method.posterior(ctx)
+
     # the stages the pipeline owns ------------------------------------------------------
     def real(self, ctx: RoundContext) -> dict:
         """New real trajectories under the collect policy, appended to the earlier rounds' (kept raw)."""
-        traj = self.comp.real.collect(ctx.round, self.comp.policy(ctx.seed, ctx), self.rc.collect.horizon, ctx.seed)
+        traj = self.real_source.collect(ctx.round, self.policy(ctx.seed, ctx), self.rc.collect.horizon, ctx.seed)
         previous = Trajectories(**ctx.output("real", ctx.round - 1)["traj"]) if ctx.round > 1 else None
         if traj is None:
             if previous is None:
@@ -63,33 +79,33 @@ class Pipeline:
 
     def score(self, ctx: RoundContext) -> dict:
         """The round's distribution against the prior (and the true parameters when known), plotted."""
-        posterior = self.comp.method.posterior(ctx)
-        names = self.comp.task.spec.names
-        true = self.comp.real.true_params
+        posterior = self.method.posterior(ctx)
+        names = self.task.spec.names
+        true = self.real_source.true_params
         lc = self.rc.logging
         plot_names = list(lc.plot_params) if lc.plot_params is not None else names[: lc.max_plot_params]
-        spec = self.comp.task.spec
-        ctx.tb.posterior(ctx.round, posterior, self.comp.prior, names, plot_names, true, lc.plot_samples,
+        spec = self.task.spec
+        ctx.tb.posterior(ctx.round, posterior, self.prior, names, plot_names, true, lc.plot_samples,
                          spec.low, spec.high)
-        return score(posterior, self.comp.prior, names, true, ctx.seed)
+        return score(posterior, self.prior, names, true, ctx.seed)
 
     # the loop ------------------------------------------------------------------------
     def run(self, stop_after: tuple[int, str] | None = None) -> dict:
         """Run every round; `stop_after=(round, stage)` returns early there (tests of resuming)."""
-        names = self.comp.task.spec.names
-        true = self.comp.real.true_params
+        names = self.task.spec.names
+        true = self.real_source.true_params
         results: dict[str, Any] = {
             "task": self.cfg.task.name, "method": self.cfg.method.name, "model": self.cfg.model.name,
             "summarizer": self.cfg.summarizer.name, "policy": self.cfg.policy.name, "seed": self.rc.seed,
             "run_name": self.rc.run_name, "param_names": names,
             "true_params": None if true is None else dict(zip(names, map(float, true))),
-            "prior": {"low": dict(zip(names, map(float, self.comp.task.spec.low))),
-                      "high": dict(zip(names, map(float, self.comp.task.spec.high)))},
+            "prior": {"low": dict(zip(names, map(float, self.task.spec.low))),
+                      "high": dict(zip(names, map(float, self.task.spec.high)))},
             "rounds": [],
         }
         try:
             for r in range(1, self.rc.rounds + 1):
-                ctx = RoundContext(self.comp, self.run_dir, r, self.rc.seed, self.tb)
+                ctx = RoundContext(self.run_dir, r, self.rc.seed, self.tb)
                 seconds = {}
                 for stage in self.stages:
                     if run_stage(ctx, stage):
@@ -100,11 +116,12 @@ class Pipeline:
                 for stage in self.stages:
                     if self.run_dir.has(r, stage.name):
                         seconds[stage.name] = round(float(ctx.output(stage.name)["seconds"]), 3)
-                record = self._record(ctx, seconds)
+                recording = ctx.at("record")
+                record = self._record(recording, seconds)
                 results["rounds"].append(record)
                 self.run_dir.write_json("results.json", results)
                 self.tb.scalars(r, _numbers(record))
-                reason = self.comp.method.stop_reason(ctx)
+                reason = self.method.stop_reason(recording)
                 if reason is not None:
                     raise PosteriorError(reason)
         finally:  # also after a failing stage: the figures drawn so far reach TensorBoard
@@ -124,13 +141,10 @@ class Pipeline:
                 ctx.remember(stage.name, shrunk)
 
     def _record(self, ctx: RoundContext, seconds: dict) -> dict:
-        ctx.stage = "record"
         record = {"round": ctx.round, "real_trajectories": int(ctx.output("real")["traj"]["states"].shape[0])}
-        record.update(self.comp.method.record(ctx))
+        record.update(self.method.record(ctx))
         record.update({k: v for k, v in ctx.output("score").items() if k != "seconds"})
-        record["surrogate_real_return"] = None
-        if self.comp.rl is not None:
-            record.update(self.comp.rl.record(ctx))
+        record.update(self.rl.record(ctx))
         record["seconds"] = seconds
         return record
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import importlib
 from collections.abc import Callable
 from pathlib import Path
@@ -34,6 +35,9 @@ CONF_DIR = Path(__file__).parent / "conf"  # the package's config (a link to con
 class Entry:
     factory: Callable[..., Any]
     params: type
+    # methods: (RoundContext, prior) -> the distribution a finished round handed on, read from its artifacts alone,
+    # so that api.load_run builds no simulator (None: the method has none)
+    posterior: Callable[..., Any] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,10 +47,11 @@ class Builtin:
 
     factory: str
     params: str
+    posterior: str | None = None  # methods: Entry.posterior
 
 
-def _same_module(module: str, factory: str, params: str) -> Builtin:
-    return Builtin(f"{module}:{factory}", f"{module}:{params}")
+def _same_module(module: str, factory: str, params: str, posterior: str | None = None) -> Builtin:
+    return Builtin(f"{module}:{factory}", f"{module}:{params}", None if posterior is None else f"{module}:{posterior}")
 
 
 # group -> option -> a built-in by import path, or the Entry that `register` gave (a plugin's; the modules of
@@ -72,9 +77,10 @@ _REGISTRY: dict[str, dict[str, Entry | Builtin]] = {
         "gaussian": _same_module("priors", "gaussian_prior", "GaussianPriorConfig"),
     },
     "method": {
-        "bayessim": _same_module("inference.bayessim.method", "bayessim", "BayesSimConfig"),
-        "simopt": _same_module("inference.simopt.method", "simopt", "SimOptConfig"),
-        "sysid": _same_module("inference.sysid.method", "sysid", "SysidConfig"),
+        "bayessim": Builtin("inference.bayessim.method:bayessim", "inference.bayessim.method:BayesSimConfig",
+                            "inference.bayessim.handed_on:handed_on"),
+        "simopt": _same_module("inference.simopt.method", "simopt", "SimOptConfig", "searched"),
+        "sysid": _same_module("inference.sysid.method", "sysid", "SysidConfig", "fitted"),
     },
     "policy": {
         "random": _same_module("policies", "random_policy", "RandomPolicyConfig"),
@@ -116,15 +122,19 @@ _REGISTRY: dict[str, dict[str, Entry | Builtin]] = {
 GROUPS = tuple(_REGISTRY)
 
 
-def register(group: str, name: str, params: type) -> Callable[[Callable], Callable]:
-    """Decorator: register `factory(params_instance, **deps)` as option `name` of `group`."""
+def register(group: str, name: str, params: type,
+             posterior: Callable[..., Any] | None = None) -> Callable[[Callable], Callable]:
+    """Decorator: register `factory(params_instance, **deps)` as option `name` of `group`; a method may give
+    `posterior(ctx, prior)`, which reads a finished round's distribution back for api.load_run (Entry.posterior)."""
     if group not in _REGISTRY:
         raise ConfigError(f"unknown config group {group!r}; groups are {sorted(_REGISTRY)}")
     if not dataclasses.is_dataclass(params):
         raise TypeError(f"params of {group}/{name} must be a dataclass, got {params!r}")
+    if posterior is not None and group != "method":
+        raise TypeError(f"only a method reads a posterior back; {group}/{name} was given one")
 
     def deco(factory: Callable) -> Callable:
-        _REGISTRY[group][name] = Entry(factory, params)
+        _REGISTRY[group][name] = Entry(factory, params, posterior)
         return factory
 
     return deco
@@ -147,8 +157,19 @@ def entry(group: str, name: str) -> Entry:
     """The option's factory and parameter dataclass (imports its modules on first use)."""
     option = _option(group, name)
     if isinstance(option, Builtin):
-        option = Entry(_resolve(option.factory), _resolve(option.params))
+        reader = None if option.posterior is None else _resolve(option.posterior)
+        option = Entry(_resolve(option.factory), _resolve(option.params), reader)
     return option
+
+
+def posterior_reader(method: str) -> Callable[..., Any]:
+    """Method `method`'s Entry.posterior; imports the reader's module only (BayesSim's is apart from its method)."""
+    option = _option("method", method)
+    reader = option.posterior
+    if reader is None:
+        raise ConfigError(f"method={method} gives no reader of its posterior from a run's artifacts: register it "
+                          "with registry.register('method', name, params, posterior=...)")
+    return _resolve(reader) if isinstance(reader, str) else reader
 
 
 def params_type(group: str, name: str) -> type:
@@ -228,8 +249,14 @@ def option_defaults(group: str, name: str) -> dict:
 
 
 def build(group: str, cfg: DictConfig | dict, **deps: Any) -> Any:
+    return factory(group, cfg)(**deps)
+
+
+def factory(group: str, cfg: DictConfig | dict) -> Callable[..., Any]:
+    """The option's factory with its checked parameters bound: what builds the option many times (a model per
+    round, a policy per stage) parses its config, and reads its YAML defaults, once."""
     name, params = parse_params(group, cfg)
-    return entry(group, name).factory(params, **deps)
+    return functools.partial(entry(group, name).factory, params)
 
 
 def _type_name(tp: Any) -> str:

@@ -8,18 +8,19 @@ stage leaves every other stage's results unchanged.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import hashlib
 import logging
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 if TYPE_CHECKING:
     from .artifacts import RunDir
-    from .components import Components
+    from .logging.tensorboard import TensorBoardLogger
 
 log = logging.getLogger(__name__)
 
@@ -42,11 +43,10 @@ def stage_seed(seed: int, round_index: int, stage: str) -> int:
 def run_stage(ctx: RoundContext, stage: Stage) -> bool:
     """Run `stage` of ctx's round unless its artifact exists; save the artifact, with the stage's wall
     seconds, before returning. Returns whether it ran."""
-    ctx.stage = stage.name
     if ctx.has(stage.name):
         return False
     t0 = time.perf_counter()
-    out = stage.run(ctx)
+    out = stage.run(ctx.at(stage.name))
     out["seconds"] = time.perf_counter() - t0
     ctx.run_dir.save(ctx.round, stage.name, out)
     ctx.remember(stage.name, out)
@@ -67,12 +67,18 @@ def check_stages(stages: list[Stage]) -> None:
 
 
 class RoundContext:
-    """What a stage sees: the round, its seed, the run's components, and earlier artifacts."""
+    """What a stage sees: the round, its seed, the TensorBoard logger and earlier artifacts. The stage's own
+    objects (simulators, prior, ...) come with the object the stage belongs to, not through here."""
 
-    def __init__(self, comp: Components, run_dir: RunDir, round_index: int, seed: int, tb: Any):
-        self.comp, self.run_dir, self.round, self.run_seed, self.tb = comp, run_dir, round_index, seed, tb
-        self.stage = ""
+    def __init__(self, run_dir: RunDir, round_index: int, seed: int, tb: TensorBoardLogger | None, stage: str = ""):
+        self.run_dir, self.round, self.run_seed, self.tb, self.stage = run_dir, round_index, seed, tb, stage
         self._cache: dict[tuple[int, str], dict] = {}
+
+    def at(self, stage: str) -> RoundContext:
+        """This round's context for `stage`: seeded by its name, sharing the artifacts loaded so far."""
+        bound = copy.copy(self)
+        bound.stage = stage
+        return bound
 
     @property
     def seed(self) -> int:

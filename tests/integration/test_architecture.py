@@ -34,29 +34,29 @@ PLUGIN = textwrap.dedent('''
 
 
     class Rejection(InferenceMethod):
-        def __init__(self, cfg, comp):
-            self.cfg, self.comp = cfg, comp
+        def __init__(self, cfg, inputs):
+            self.cfg, self.inputs = cfg, inputs
 
         def stages(self):
             return [Stage("simulate", self.simulate), Stage("accept", self.accept, inputs=("simulate", "real"))]
 
         def proposal(self, ctx):
-            return self.comp.prior
+            return self.inputs.prior
 
         def simulate(self, ctx):
-            theta = self.proposal(ctx).sample((self.comp.rc.collect.trajectories,),
+            theta = self.proposal(ctx).sample((self.inputs.rc.collect.trajectories,),
                                               generator=torch.Generator().manual_seed(ctx.seed))
-            traj = self.comp.sims.rollout(theta, self.comp.policy(ctx.seed), self.comp.rc.collect.horizon, ctx.seed)
-            return {"theta": theta, "x": self.comp.summarizer(traj)}
+            traj = self.inputs.sims.rollout(theta, self.inputs.policy(ctx.seed), self.inputs.rc.collect.horizon, ctx.seed)
+            return {"theta": theta, "x": self.inputs.summarizer(traj)}
 
         def accept(self, ctx):
             sims = ctx.output("simulate")
-            x_real = self.comp.summarizer(real_trajectories(ctx)).mean(0)
+            x_real = self.inputs.summarizer(real_trajectories(ctx)).mean(0)
             scale = sims["x"].std(0).clamp_min(1e-8)
             distance = ((sims["x"] - x_real) / scale).norm(dim=1)
             kept = sims["theta"][distance.argsort()[: max(3, int(self.cfg.accept * len(distance)))]]
             gaussian = GaussianMixture(torch.zeros(1), kept.mean(0, keepdim=True), torch.cov(kept.T)[None])
-            return {"posterior": TruncatedMixture(gaussian, self.comp.prior.low, self.comp.prior.high, seed=ctx.seed),
+            return {"posterior": TruncatedMixture(gaussian, self.inputs.prior.low, self.inputs.prior.high, seed=ctx.seed),
                     "kept": len(kept)}
 
         def posterior(self, ctx):
@@ -67,8 +67,8 @@ PLUGIN = textwrap.dedent('''
 
 
     @register("method", "rejection", RejectionConfig)
-    def rejection(cfg, comp):
-        return Rejection(cfg, comp)
+    def rejection(cfg, inputs):
+        return Rejection(cfg, inputs)
 
 
     @dataclasses.dataclass

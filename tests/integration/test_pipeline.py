@@ -245,6 +245,30 @@ def test_a_guard_failure_in_round_1_hands_on_the_prior(compose, tmp_path, monkey
     assert results["rounds"][1]["proposal"] == "prior"
 
 
+def test_a_finished_runs_posteriors_are_read_back_without_building_a_simulator(compose, tmp_path, monkeypatch):
+    """api.load_run reads what each round handed on (round 1: the prior, its guard failing; round 2: its own
+    posterior) from the artifacts and the prior alone: the distributions the pipeline handed on."""
+    from bayessim_exp.diagnostics import guard
+    from bayessim_exp.stages import RoundContext
+
+    verdicts = iter([guard.GuardReport(["overconfident: forced"], True), guard.GuardReport([])])
+    monkeypatch.setattr("bayessim_exp.inference.bayessim.method.check_posterior", lambda *a, **k: next(verdicts))
+    pipeline = Pipeline(compose(SMOKE), tmp_path)
+    results = pipeline.run()
+    assert [r["guard"]["handed_on"] for r in results["rounds"]] == ["the prior", "round 2's posterior"]
+    handed_on = [pipeline.method.posterior(RoundContext(pipeline.run_dir, r, pipeline.rc.seed, None)) for r in (1, 2)]
+
+    build = registry.build
+    monkeypatch.setattr(registry, "build", lambda group, cfg, **deps: pytest.fail(f"built a {group}")
+                        if group in ("sim", "summarizer", "model") else build(group, cfg, **deps))
+    monkeypatch.setattr("bayessim_exp.sim.pool.SimulatorPool.__init__", lambda *a, **k: pytest.fail("built a pool"))
+    run = api.load_run(tmp_path)
+    for r, want in zip((1, 2), handed_on):
+        draws = [d.sample((100,), generator=torch.Generator().manual_seed(r)) for d in (run.posterior(r), want)]
+        torch.testing.assert_close(*draws)
+    torch.testing.assert_close(run.posterior().log_prob(draws[0]), handed_on[1].log_prob(draws[0]))
+
+
 def test_on_guard_stop_ends_the_run_after_writing_the_round(compose, tmp_path, monkeypatch):
     from bayessim_exp.errors import PosteriorError
 

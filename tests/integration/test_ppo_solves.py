@@ -24,6 +24,6 @@ def test_ppo_solves_nominal_task(compose, tmp_path, task, bar):
     nominal_is_real = [f"task.real_params.{n}={v}" for n, v in zip(spec.names, spec.nominal)]
     cfg = compose([f"task={task}", "rl=ppo", "rl.train_on=nominal", "rl.evaluate.video_steps=0", *nominal_is_real])
     comp = build_components(cfg, check_run_config(cfg))
-    ctx = StandaloneRounds(comp, comp.prior, tmp_path).run_round(1)
-    ret = comp.rl.record(ctx)["surrogate_real_return"]
+    rounds = StandaloneRounds(cfg, comp, comp.prior, tmp_path)
+    ret = rounds.rl.record(rounds.run_round(1))["surrogate_real_return"]
     assert ret["mean"] >= bar, ret

@@ -63,12 +63,12 @@ def test_summarize_drops_and_counts_diverged_simulations(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     task = spring_task()
     traj = native(task, 4).rollout(np.array([[10.0], [1.0e6], [100.0], [1.0e6]]), RandomPolicy(1, 0), 50, seed=0)
-    comp = type("C", (), {"summarizer": lambda self, t: t.states[:, -1], "device": torch.device("cpu")})()
+    inputs = type("Inputs", (), {"summarizer": lambda self, t: t.states[:, -1], "device": torch.device("cpu")})()
     collected = {"theta": torch.tensor([[10.0], [1.0e6], [100.0], [1.0e6]]), "traj": traj.state_dict()}
     ctx = type("Ctx", (), {"output": lambda self, stage: collected})()
     cfg = BayesSimConfig(proposal="prior", finetune=True, max_components=50, parameter_space="box",
                          combination="product", replay_tempering=True, on_guard="fallback")
-    out = BayesSim(cfg, comp).summarize(ctx)
+    out = BayesSim(cfg, inputs).summarize(ctx)
     assert out["diverged"] == 2
     assert out["theta"].squeeze(1).tolist() == [10.0, 100.0]
 

@@ -77,11 +77,11 @@ def test_a_surrogate_under_a_replaying_collect_policy_is_driven_at_random_and_th
     from bayessim_exp.pipeline import Pipeline
     from bayessim_exp.policies import RandomPolicy, ReplayPolicy
 
-    comp = Pipeline(compose(["debug=smoke", "policy=replay"]), tmp_path).comp
-    policy = comp.policy(seed=11)
+    pipeline = Pipeline(compose(["debug=smoke", "policy=replay"]), tmp_path)
+    policy = pipeline.policy(seed=11)
     assert isinstance(policy, ReplayPolicy)
-    real = comp.real.collect(1, policy, horizon=15, seed=11)
-    torch.testing.assert_close(real.actions, RandomPolicy(comp.task.action_dim, 11).open_loop_actions(1, 15))
+    real = pipeline.real_source.collect(1, policy, horizon=15, seed=11)
+    torch.testing.assert_close(real.actions, RandomPolicy(pipeline.task.action_dim, 11).open_loop_actions(1, 15))
 
 
 def test_real_data_from_a_file_replay_by_default_and_the_command_line_wins(compose):

@@ -44,7 +44,7 @@ def test_surprising_but_usable_files_are_reported(compose, tmp_path, caplog):
     caplog.set_level(logging.WARNING)
     path = _file(tmp_path, steps=40, params=np.array([1.0, 0.5]), param_names=np.array(["m", "l"]))
     pipeline = _build(compose, tmp_path, path)
-    assert pipeline.comp.real.true_params is None
+    assert pipeline.real_source.true_params is None
     assert "params are given for ['m', 'l'] but task Pendulum infers ['mass', 'length']" in caplog.text
     assert "trajectories have 40 steps; only the first collect.horizon=20 are used" in caplog.text
 

@@ -136,12 +136,12 @@ def test_train_evaluate_finetune_outside_the_pipeline(compose, tmp_path):
     def rounds(out_dir):
         cfg = compose(["task=Pendulum", "rl=ppo", "debug=smoke", "rl.finetune=true", "rl.evaluate.video_steps=3"])
         comp = build_components(cfg, check_run_config(cfg))
-        return comp, StandaloneRounds(comp, comp.prior, out_dir)
+        return StandaloneRounds(cfg, comp, comp.prior, out_dir)
 
-    comp, runner = rounds(tmp_path / "a")
-    assert comp.rl.actor(runner.context(1)) is None
+    runner = rounds(tmp_path / "a")
+    assert runner.rl.actor(runner.context(1)) is None
     ctx = runner.run_round(1)
-    record = comp.rl.record(ctx)
+    record = runner.rl.record(ctx)
     ret = record["surrogate_real_return"]
     assert ret["min"] <= ret["mean"] <= ret["max"] < 0  # Pendulum's rewards are costs
     assert record["rl_training"]["steps"] == 512
@@ -149,10 +149,10 @@ def test_train_evaluate_finetune_outside_the_pipeline(compose, tmp_path):
     if video is not None:  # a GIF where OpenGL works; otherwise the reason was logged
         assert video[:6] == b"GIF89a"
     first = ctx.output("train_policy")["trainer"]
-    assert comp.rl.actor(runner.context(2)) is not None  # round 1's actor collects until round 2's is trained
+    assert runner.rl.actor(runner.context(2)) is not None  # round 1's actor collects until round 2's is trained
     second = runner.run_round(2).output("train_policy")["trainer"]
     assert second["steps_done"] == 2 * first["steps_done"]  # continued round 1's policy
-    again = rounds(tmp_path / "b")[1].run_round(1).output("train_policy")["trainer"]["agent"]
+    again = rounds(tmp_path / "b").run_round(1).output("train_policy")["trainer"]["agent"]
     assert all(torch.equal(first["agent"][k], again[k]) for k in first["agent"])  # seeded by stage name
 
 

@@ -8,7 +8,7 @@ from bayessim_exp.pipeline import Pipeline
 
 
 def _truth(compose, tmp_path, *overrides):
-    return Pipeline(compose(["debug=smoke", *overrides]), tmp_path).comp.real.true_params
+    return Pipeline(compose(["debug=smoke", *overrides]), tmp_path).real_source.true_params
 
 
 def test_each_seed_draws_its_own_truth_from_the_prior_reproducibly(compose, tmp_path):

@@ -12,16 +12,52 @@ The pipeline owns the loop, seeds, artifacts and logging; a method contributes
     stop_reason(ctx) why the run must stop after this round (its results written), or None
 
 Methods are a config group (`method=bayessim`); a researcher's own is registered with
-`registry.register("method", name, ConfigDataclass)` on a factory `(cfg, comp) -> InferenceMethod`.
+`registry.register("method", name, ConfigDataclass)` on a factory `(cfg, inputs: MethodInputs) -> InferenceMethod`,
+and with `posterior=` a reader `(ctx, prior)` of a finished round's distribution from its artifacts alone, which
+`api.load_run(...).posterior()` uses without building simulators.
 """
 
 from __future__ import annotations
 
 import abc
+import dataclasses
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
+
+import torch
 
 from ..distributions.base import ParameterDistribution
 from ..sim.trajectories import Trajectories
 from ..stages import RoundContext, Stage
+
+if TYPE_CHECKING:
+    from ..models.base import PosteriorModel
+    from ..run_config import RunConfig
+    from ..sim.base import Policy
+    from ..sim.pool import SimulatorPool
+    from ..summarizers.base import Summarizer
+    from ..tasks.base import Task
+
+
+class PolicyFactory(Protocol):
+    def __call__(self, seed: int, ctx: RoundContext | None = None) -> Policy:
+        """The collect policy, seeded; within a round (ctx) `rl`/`rl_randomized` act with the latest trained actor
+        and `replay` replays the real trajectories recorded so far."""
+        ...
+
+
+@dataclasses.dataclass(frozen=True)
+class MethodInputs:
+    """What an inference method uses, built by the pipeline and handed to the method's factory."""
+
+    task: Task
+    prior: ParameterDistribution
+    sims: SimulatorPool
+    summarizer: Summarizer
+    rc: RunConfig  # the run's settings (collect, diagnostics, logging)
+    device: torch.device
+    model: Callable[[], PosteriorModel]  # a fresh posterior model q(theta | x) for this task and summarizer
+    policy: PolicyFactory
 
 
 class InferenceMethod(abc.ABC):

@@ -1,8 +1,11 @@
-"""What the pipeline asks of an RL component (an option of the `rl` config group; rl=none builds None)."""
+"""What the pipeline asks of an RL component (an option of the `rl` config group; rl=none builds one without
+stages, rl/none.py)."""
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import Protocol
+
+import torch
 
 from ..stages import RoundContext, Stage
 
@@ -12,7 +15,7 @@ class RLComponent(Protocol):
         """The round's RL stages, run after the inference method's."""
         ...
 
-    def actor(self, ctx: RoundContext) -> Any:
+    def actor(self, ctx: RoundContext) -> torch.nn.Module | None:
         """The latest trained actor at this point of the round (None before the first), for policy=rl."""
         ...
 

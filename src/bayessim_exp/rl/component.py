@@ -11,20 +11,25 @@ Stages (run by the pipeline after the round's score stage, each saved as round_N
 `train_on=prior` is the uniform domain-randomization baseline and `nominal` trains on the MJCF's own
 parameters, so the posterior-vs-prior-vs-nominal comparison is one sweep over rl.train_on.
 
-It reads from the round's context (stages.RoundContext): the seed, earlier artifacts, the TensorBoard
-logger and the run's components (simulator pool, prior, the inference method's posterior, the real
-data source's true parameters).
+It is built with what it uses (the task, simulator pool, device, prior, the real data source's true
+parameters and `distribution(ctx)`, the round's distribution: in a pipeline the inference method's posterior)
+and reads from the round's context (stages.RoundContext) only the seed, earlier artifacts and the TensorBoard
+logger.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 import numpy as np
 import torch
 
+from ..distributions.base import ParameterDistribution
 from ..errors import ConfigError
+from ..sim.pool import SimulatorPool
 from ..stages import RoundContext, Stage
+from ..tasks.base import Task
 from .actor_policy import ActorPolicy
 from .config import PPOComponentConfig
 from .env import SimulatorEnv, distribution_sampler, fixed_params
@@ -36,12 +41,15 @@ log = logging.getLogger(__name__)
 
 
 class PPOComponent:
-    def __init__(self, cfg: PPOComponentConfig, comp):
-        self.cfg, self.task, self.device = cfg, comp.task, comp.device
+    def __init__(self, cfg: PPOComponentConfig, task: Task, sims: SimulatorPool, device: torch.device,
+                 prior: ParameterDistribution, true_params: np.ndarray | None,
+                 distribution: Callable[[RoundContext], ParameterDistribution]):
+        self.cfg, self.task, self.sims, self.device, self.prior = cfg, task, sims, device, prior
+        self.true_params, self.distribution = true_params, distribution
         self.train_cfg = cfg.train
 
     def stages(self) -> list[Stage]:
-        # train_policy reads the round's distribution through the inference method, not an artifact
+        # train_policy reads the round's distribution through `distribution`, not an artifact
         return [Stage("train_policy", self.train_policy), Stage("evaluate", self.evaluate, inputs=("train_policy",))]
 
     def trainer(self, state: dict | None = None) -> PPOTrainer:
@@ -53,7 +61,7 @@ class PPOComponent:
     def sampler(self, ctx: RoundContext):
         if self.cfg.train_on == "nominal":
             return fixed_params(self.task.spec.nominal)
-        return distribution_sampler(ctx.comp.prior if self.cfg.train_on == "prior" else ctx.comp.method.posterior(ctx))
+        return distribution_sampler(self.prior if self.cfg.train_on == "prior" else self.distribution(ctx))
 
     def train_policy(self, ctx: RoundContext) -> dict:
         previous = ctx.output("train_policy", ctx.round - 1) if self.cfg.finetune and ctx.round > 1 else None
@@ -62,7 +70,7 @@ class PPOComponent:
         with torch.random.fork_rng():
             torch.manual_seed(ctx.seed)  # network initialisation and action sampling
             trainer = self.trainer(None if previous is None else previous["trainer"])
-            env = SimulatorEnv(ctx.comp.sims.get(self.train_cfg.num_envs), self.sampler(ctx), ctx.seed)
+            env = SimulatorEnv(self.sims.get(self.train_cfg.num_envs), self.sampler(ctx), ctx.seed)
             curve = trainer.train(env, ctx.seed, self._logger(ctx))
         log.info("round %d: PPO on %s, %d steps in %.1f s, last training episode return %.1f", ctx.round,
                  self.cfg.train_on, curve["steps"][-1], curve["seconds"][-1], _last_finite(curve["episode_return"]))
@@ -78,14 +86,14 @@ class PPOComponent:
 
         return on_batch
 
-    def actor(self, ctx: RoundContext):
+    def actor(self, ctx: RoundContext) -> torch.nn.Module | None:
         """The latest trained actor at this point of the round (None before the first train_policy)."""
         for r in range(ctx.round, 0, -1):
             if ctx.has("train_policy", r):
                 return self._actor(ctx.output("train_policy", r)["trainer"])
         return None
 
-    def _actor(self, state: dict):
+    def _actor(self, state: dict) -> torch.nn.Module:
         """The trained actor alone: loss, advantage and optimiser are only for training (and this runs at
         every collect-policy build)."""
         agent = make_agent(self.train_cfg, self.task.obs_dim, self.task.action_dim, self.device)
@@ -93,13 +101,13 @@ class PPOComponent:
         return agent.actor
 
     def evaluate(self, ctx: RoundContext) -> dict:
-        real_params = ctx.comp.real.true_params
+        real_params = self.true_params
         if real_params is None:
             log.warning("round %d: the real data source has no true parameters: no surrogate-real evaluation", ctx.round)
             return {"summary": None, "video": None}
         actor = self._actor(ctx.output("train_policy")["trainer"])
         e = self.cfg.evaluate
-        returns = episode_returns(actor, ctx.comp.sims.get(e.episodes), real_params, ctx.seed)
+        returns = episode_returns(actor, self.sims.get(e.episodes), real_params, ctx.seed)
         out = {"returns": returns, "summary": summary(returns), "video": None}
         if e.video_steps:
             policy = ActorPolicy(actor, self.task.action_dim, ctx.seed, random_share=0.0)
@@ -121,12 +129,14 @@ class PPOComponent:
                                 "last_episode_return": _last_finite(curve["episode_return"])}}
 
 
-def ppo_component(cfg: PPOComponentConfig, comp, **_: object):
-    """comp: the run's Components; the networks train on the run's `device`."""
-    if not comp.task.has_reward:
-        raise ConfigError(f"rl=ppo trains on the task's reward, and task={comp.task.name} defines none: give the "
+def ppo_component(cfg: PPOComponentConfig, task: Task, sims: SimulatorPool, device: torch.device,
+                  prior: ParameterDistribution, true_params: np.ndarray | None,
+                  distribution: Callable[[RoundContext], ParameterDistribution]) -> PPOComponent:
+    """The networks train on `device`; true_params: the real data source's, for the surrogate-real evaluation."""
+    if not task.has_reward:
+        raise ConfigError(f"rl=ppo trains on the task's reward, and task={task.name} defines none: give the "
                           "task a reward (task=mjcf: its `reward` key), or run without RL (rl=none)")
-    return PPOComponent(cfg, comp)
+    return PPOComponent(cfg, task, sims, device, prior, true_params, distribution)
 
 
 def _last_finite(values: list[float]) -> float | None:

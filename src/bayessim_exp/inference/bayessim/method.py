@@ -31,9 +31,10 @@ from ...errors import ConfigError, PosteriorError
 from ...models.base import column_scale
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
-from ..base import InferenceMethod, real_trajectories
+from ..base import InferenceMethod, MethodInputs, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition, tempered_product
+from .handed_on import handed_on, handed_on_round
 from .identifiability_checks import log_findings, nominal_point, summaries_at
 from .model_checks import coverage_near_real, extrapolation
 from .parameter_space import PARAMETER_SPACES, probit_transform
@@ -69,15 +70,15 @@ class BayesSimConfig:
 
 
 class BayesSim(InferenceMethod):
-    def __init__(self, cfg: BayesSimConfig, comp):
-        self.cfg, self.comp = cfg, comp
+    def __init__(self, cfg: BayesSimConfig, inputs: MethodInputs):
+        self.cfg, self.inputs = cfg, inputs
         self.proposer = proposal_named(cfg.proposal)
-        self.probit = None if cfg.parameter_space == "box" else probit_transform(cfg.parameter_space, comp.prior)
+        self.probit = None if cfg.parameter_space == "box" else probit_transform(cfg.parameter_space, inputs.prior)
 
     def stages(self) -> list[Stage]:
         return [
             Stage("proposal", self.propose),
-            Stage("collect", self.collect, inputs=("proposal",), transient=not self.comp.rc.collect.keep_trajectories),
+            Stage("collect", self.collect, inputs=("proposal",), transient=not self.inputs.rc.collect.keep_trajectories),
             Stage("summarize", self.summarize, inputs=("collect",)),
             Stage("identifiability", self.identifiability, inputs=("summarize",)),
             Stage("fit", self.fit, inputs=("proposal", "summarize")),
@@ -92,14 +93,14 @@ class BayesSim(InferenceMethod):
         records it ('prior' where the round falls back to the prior) and the distribution, None for the prior."""
         r, proposal = ctx.round, None
         if r > 1:
-            proposal = self.proposer.build(self._handed_on(ctx, r - 1),
-                                           ProposalInputs(r, self.comp.prior, self.probit, ctx.seed))
+            proposal = self.proposer.build(handed_on(ctx, self.inputs.prior, r - 1),
+                                           ProposalInputs(r, self.inputs.prior, self.probit, ctx.seed))
         return {"name": "prior" if proposal is None else self.proposer.name, "proposal": proposal}
 
     def proposal(self, ctx: RoundContext) -> ParameterDistribution:
         """The proposal stage's distribution; the prior where it has none."""
         proposal = ctx.output("proposal")["proposal"]
-        return self.comp.prior if proposal is None else proposal
+        return self.inputs.prior if proposal is None else proposal
 
     def _proposal_name(self, ctx: RoundContext) -> str:
         return ctx.output("proposal")["name"]
@@ -109,36 +110,36 @@ class BayesSim(InferenceMethod):
         noise, the last rows (twice the held-out share) replay them as they were executed: the pairs the spread is
         calibrated on and the held-out pairs, drawn like the real data (docs/statistics.md, 'Simulations driven
         like the real system')."""
-        rc = self.comp.rc
+        rc = self.inputs.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
-        policy = self.comp.policy(ctx.seed, ctx)
+        policy = self.inputs.policy(ctx.seed, ctx)
         exact = without_noise(policy)
         n_exact = 0 if exact is None else 2 * held_out_count(len(theta), rc.diagnostics.held_out_fraction)
         cut = len(theta) - n_exact
-        traj = self.comp.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)
+        traj = self.inputs.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)
         if n_exact:
             exact_seed = stage_seed(ctx.run_seed, ctx.round, "collect_exact")
-            traj = Trajectories.cat([traj, self.comp.sims.rollout(theta[cut:], exact, rc.collect.horizon, exact_seed)])
+            traj = Trajectories.cat([traj, self.inputs.sims.rollout(theta[cut:], exact, rc.collect.horizon, exact_seed)])
         return {"theta": theta.float(), "traj": traj.state_dict(), "exact": torch.arange(len(theta)) >= cut}
 
     def summarize(self, ctx: RoundContext) -> dict:
-        return summarized(ctx.output("collect"), self.comp.summarizer, self.comp.device)
+        return summarized(ctx.output("collect"), self.inputs.summarizer, self.inputs.device)
 
     def identifiability(self, ctx: RoundContext) -> dict:
         """What the round's summaries can say about each parameter (diagnostics/identifiability.py): the linear read
         of its training simulations, and in round 1 the local sensitivity at the nominal parameters, whose
         parameters that move nothing are said before any fit."""
         theta, x, _, _ = self._split(ctx.output("summarize"))
-        d, names = self.comp.rc.diagnostics, self.comp.task.spec.names
-        report = {**linear_read(x.to(self.comp.device), self._fitted_space(theta), names), "local": None}
+        d, names = self.inputs.rc.diagnostics, self.inputs.task.spec.names
+        report = {**linear_read(x.to(self.inputs.device), self._fitted_space(theta), names), "local": None}
         if d.sensitivity_sims and ctx.round == 1:
             def simulate(points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-                return summaries_at(points, task=self.comp.task, sims=self.comp.sims,
-                                    policy=self.comp.policy(ctx.seed, ctx), prior_std=self.comp.prior.stddev,
-                                    num=d.sensitivity_sims, horizon=self.comp.rc.collect.horizon, seed=ctx.seed,
+                return summaries_at(points, task=self.inputs.task, sims=self.inputs.sims,
+                                    policy=self.inputs.policy(ctx.seed, ctx), prior_std=self.inputs.prior.stddev,
+                                    num=d.sensitivity_sims, horizon=self.inputs.rc.collect.horizon, seed=ctx.seed,
                                     summarize=self._summaries)
 
-            report["local"] = sensitivity(simulate, nominal_point(self.comp.task.spec, self.comp.prior.stddev),
+            report["local"] = sensitivity(simulate, nominal_point(self.inputs.task.spec, self.inputs.prior.stddev),
                                           column_scale(x.double()), names)
         log_findings(ctx.round, report)
         ctx.tb.identifiability(ctx.round, names, report)
@@ -148,23 +149,23 @@ class BayesSim(InferenceMethod):
         r = ctx.round
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         theta, x = self._fitted_space(torch.cat([d[0] for d in data])), torch.cat([d[1] for d in data])
-        model = self.comp.model()
+        model = self.inputs.model()
         if r > 1 and self.cfg.finetune:
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
         # trained on the run's device (summaries are stored on the CPU; with device=cuda they are copied there)
-        dev = self.comp.device
+        dev = self.inputs.device
         # the spread is calibrated on the latest round's pairs, drawn like the pairs the posterior is used on:
         # one factor per parameter fitted to rounds pooled from several proposals would fit the wide early ones
         latest = torch.zeros(len(theta), dtype=torch.bool)
         latest[len(theta) - len(data[-1][0]):] = True
         # simulations replayed as the real data were driven are kept for the calibration alone
-        fraction = self.comp.rc.diagnostics.held_out_fraction
+        fraction = self.inputs.rc.diagnostics.held_out_fraction
         exact = torch.cat([exact_training_rows(ctx.output("summarize", k), fraction) for k in self._fitted_rounds(ctx)])
         history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest,
                             calibration_only=exact if bool((exact & latest).any()) else None)
         ctx.tb.losses(r, history)
         theta_val, x_val = data[-1][2], data[-1][3]
-        d = self.comp.rc.diagnostics
+        d = self.inputs.rc.diagnostics
         if len(theta_val) == 0:
             return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": None,
                     "held_out": None}
@@ -172,7 +173,7 @@ class BayesSim(InferenceMethod):
                                      seed=ctx.seed)
         over_prior = held_out_gain(model, self._fitted_space(theta_val), x_val, self._fitted_prior())
         # log q - log p~ = (log q - log p) - (log p~ - log p), the same in parameter units and in probit space
-        proposal_ratio = (self.proposal(ctx).log_prob(theta_val.double()) - self.comp.prior.log_prob(theta_val.double()))
+        proposal_ratio = (self.proposal(ctx).log_prob(theta_val.double()) - self.inputs.prior.log_prob(theta_val.double()))
         held_out = {"count": len(theta_val), "gain": over_prior,
                     "gain_over_proposal": over_prior - float(proposal_ratio.mean())}
         return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
@@ -186,13 +187,13 @@ class BayesSim(InferenceMethod):
         return theta if self.probit is None else self.probit.to_probit(theta).float()
 
     def _fitted_prior(self) -> ParameterDistribution:
-        return self.comp.prior if self.probit is None else standard_normal_prior(self.probit.dim)
+        return self.inputs.prior if self.probit is None else standard_normal_prior(self.probit.dim)
 
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
-        return split(summary, self.comp.rc.diagnostics.held_out_fraction)
+        return split(summary, self.inputs.rc.diagnostics.held_out_fraction)
 
     def _fitted_model(self, ctx: RoundContext):
-        model = self.comp.model()
+        model = self.inputs.model()
         model.load_state_dict(ctx.output("fit")["model"])
         return model
 
@@ -205,7 +206,7 @@ class BayesSim(InferenceMethod):
 
         def condition_at(temperature: float):
             try:
-                post, spread = condition(model, x_real, self.comp.prior, self.cfg.max_components,
+                post, spread = condition(model, x_real, self.inputs.prior, self.cfg.max_components,
                                          proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
                                          combination=self.cfg.combination, temperature=product_tau * temperature)
             except ValueError as exc:
@@ -213,26 +214,26 @@ class BayesSim(InferenceMethod):
             spreads.append(spread)
             return post
 
-        d = self.comp.rc.diagnostics
-        replayable = d.replay_sims > 0 and self.comp.task.state_from_observation(
+        d = self.inputs.rc.diagnostics
+        replayable = d.replay_sims > 0 and self.inputs.task.state_from_observation(
             real.states[:1, 0].double().cpu().numpy()) is not None
         if d.replay_sims and not replayable:
             log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
-                     ctx.round, self.comp.task.name)
+                     ctx.round, self.inputs.task.name)
         out = {"x_real": x_real, "temperature": 1.0, "replay_check": None, "unwidened_replay_check": None,
                "tempering": None, "product_temperature": product_record}
         if not replayable:
             out["posterior"] = condition_at(1.0)
         else:
             def check(posterior):
-                return replayed_check(lambda theta, which: replay(self.comp.sims, theta, real, which), real, posterior,
-                                      self.comp.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
+                return replayed_check(lambda theta, which: replay(self.inputs.sims, theta, real, which), real, posterior,
+                                      self.inputs.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
                                       alpha=d.mismatch_alpha, max_distance_ratio=d.mismatch_distance_ratio)
 
             out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
-                condition_at, check, torch.diag(self.comp.prior.stddev.double() ** 2), widen=self.cfg.replay_tempering)
+                condition_at, check, torch.diag(self.inputs.prior.stddev.double() ** 2), widen=self.cfg.replay_tempering)
             out["replay_check"], out["unwidened_replay_check"] = result.record(), first.record()
-            ctx.tb.replays(ctx.round, result, list(self.comp.task.obs_names))
+            ctx.tb.replays(ctx.round, result, list(self.inputs.task.obs_names))
         out["dispersion"] = None if spreads[-1] is None else spreads[-1].record()
         out["temperature"] *= product_tau
         return out
@@ -241,7 +242,7 @@ class BayesSim(InferenceMethod):
         """For products of n > 1 trajectories (the real ones; for the local check, those and one simulated): the
         temperature fitted on sets of n simulations at the round's held-out parameters (set_calibration.py);
         (1, None) for one trajectory or without sets."""
-        d = self.comp.rc.diagnostics
+        d = self.inputs.rc.diagnostics
         theta = self._split(ctx.output("summarize"))[2][:d.combination_sets].double()
         if n < 2 or len(theta) == 0:
             return 1.0, None
@@ -258,15 +259,15 @@ class BayesSim(InferenceMethod):
     def _tempered_product(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
         """The posterior given trajectories' per-trajectory posteriors, combined as the product tempered to the
         temperature it is called with (their product computed once)."""
-        return tempered_product(conditionals, self.comp.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
+        return tempered_product(conditionals, self.inputs.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
                                 self.probit)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-        return simulate_as_driven(self.comp.sims, self.comp.policy(seed, ctx), theta, self.comp.rc.collect.horizon,
+        return simulate_as_driven(self.inputs.sims, self.inputs.policy(seed, ctx), theta, self.inputs.rc.collect.horizon,
                                   seed, self._summaries)
 
     def _summaries(self, traj: Trajectories) -> torch.Tensor:
-        return self.comp.summarizer(traj.to(self.comp.device)).cpu()
+        return self.inputs.summarizer(traj.to(self.inputs.device)).cpu()
 
     def model_check(self, ctx: RoundContext) -> dict:
         """Can the simulator, at parameters the posterior allows, reproduce the real data? The summary
@@ -274,7 +275,7 @@ class BayesSim(InferenceMethod):
         place among the simulated ones, the replayed check (condition) and the dispersion. And does the model
         know the real data: do they lie among its training simulations, is it calibrated there (the guard reads
         `extrapolation` and `local_coverage`)?"""
-        d, conditioned = self.comp.rc.diagnostics, ctx.output("condition")
+        d, conditioned = self.inputs.rc.diagnostics, ctx.output("condition")
         _, x_train, _, x_held = self._split(ctx.output("summarize"))
         outside = summaries_outside(conditioned["x_real"], x_train, x_held)
         return {"predictive_distance": self._predictive(ctx, conditioned["posterior"], conditioned["x_real"]),
@@ -286,7 +287,7 @@ class BayesSim(InferenceMethod):
     def _extrapolation(self, ctx: RoundContext, x_real: torch.Tensor) -> dict | None:
         """model_checks.extrapolation on the rounds the model is trained on (None without held-out simulations or
         with `diagnostics.extrapolation_alpha` 0)."""
-        alpha = self.comp.rc.diagnostics.extrapolation_alpha
+        alpha = self.inputs.rc.diagnostics.extrapolation_alpha
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         if alpha == 0 or len(data[-1][3]) == 0:
             return None
@@ -298,7 +299,7 @@ class BayesSim(InferenceMethod):
         sets (_product_temperature), so the check finds what is wrong near the real data beyond what products
         get wrong on average (the handed-on posterior is widened for that already). No replay widening: the
         simulations have no model error."""
-        d = self.comp.rc.diagnostics
+        d = self.inputs.rc.diagnostics
         if d.local_sets == 0:
             return None
         if conditioned["posterior"].effective_sample_size is not None:  # each draw's posterior would be sampled too
@@ -314,13 +315,13 @@ class BayesSim(InferenceMethod):
                                      d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:
-        num, horizon = self.comp.rc.diagnostics.predictive_sims, self.comp.rc.collect.horizon
+        num, horizon = self.inputs.rc.diagnostics.predictive_sims, self.inputs.rc.collect.horizon
         if num == 0:
             return None
         return predictive_distances(
-            lambda theta: predictive_summaries(self.comp.sims, self.comp.policy(ctx.seed, ctx), theta, horizon,
-                                               ctx.seed, self.comp.summarizer, self.comp.device),
-            x_real, posterior, self.comp.prior, num, ctx.seed)
+            lambda theta: predictive_summaries(self.inputs.sims, self.inputs.policy(ctx.seed, ctx), theta, horizon,
+                                               ctx.seed, self.inputs.summarizer, self.inputs.device),
+            x_real, posterior, self.inputs.prior, num, ctx.seed)
 
     def guard(self, ctx: RoundContext) -> dict:
         """The guard's findings (diagnostics/guard.py) and what the round hands on to domain randomization
@@ -337,25 +338,17 @@ class BayesSim(InferenceMethod):
                                  local=checked.get("local_coverage"),
                                  extrapolation=None if widened_by_replays else checked.get("extrapolation"))
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
-        handed_on = self._handed_on_round(ctx, r - 1) if action == "fallback" else r
+        source = handed_on_round(ctx, r - 1) if action == "fallback" else r
         for warning in report.warnings:
             log.warning("round %d: %s", r, warning)
         if action == "fallback":
             log.warning("round %d: the guard failed; domain randomization and the next proposal get %s instead "
-                        "(method.on_guard=fallback)", r, _round_name(handed_on))
-        return {**report.to_dict(), "action": action, "handed_on": handed_on}
-
-    def _handed_on_round(self, ctx: RoundContext, r: int) -> int:
-        """The round whose posterior round r handed on; 0: the prior."""
-        return 0 if r == 0 else ctx.output("guard", r)["handed_on"]
-
-    def _handed_on(self, ctx: RoundContext, r: int) -> ParameterDistribution:
-        source = self._handed_on_round(ctx, r)
-        return self.comp.prior if source == 0 else ctx.output("condition", source)["posterior"]
+                        "(method.on_guard=fallback)", r, _round_name(source))
+        return {**report.to_dict(), "action": action, "handed_on": source}
 
     # results -------------------------------------------------------------------------
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
-        return self._handed_on(ctx, ctx.round)
+        return handed_on(ctx, self.inputs.prior)
 
     def stop_reason(self, ctx: RoundContext) -> str | None:
         guard = ctx.output("guard")
@@ -367,7 +360,7 @@ class BayesSim(InferenceMethod):
         summary, fitted, conditioned, guard = (ctx.output(s) for s in ("summarize", "fit", "condition", "guard"))
         hist = fitted["history"]
         return {
-            "sim_trajectories": self.comp.rc.collect.trajectories,
+            "sim_trajectories": self.inputs.rc.collect.trajectories,
             "train_set_size": fitted["num_train"],
             "diverged": summary["diverged"],
             "epochs": hist["epochs"],
@@ -392,5 +385,5 @@ def _round_name(r: int) -> str:
     return "the prior" if r == 0 else f"round {r}'s posterior"
 
 
-def bayessim(cfg: BayesSimConfig, comp) -> BayesSim:
-    return BayesSim(cfg, comp)
+def bayessim(cfg: BayesSimConfig, inputs: MethodInputs) -> BayesSim:
+    return BayesSim(cfg, inputs)

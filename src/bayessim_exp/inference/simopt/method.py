@@ -16,7 +16,7 @@ from ...distributions.base import ParameterDistribution
 from ...distributions.mixture import GaussianMixture, TruncatedMixture
 from ...errors import ConfigError, PosteriorError
 from ...stages import RoundContext, Stage
-from ..base import InferenceMethod, real_trajectories
+from ..base import InferenceMethod, MethodInputs, real_trajectories
 from .discrepancy import Discrepancy
 from .reps import Gaussian
 from .rollouts import simulate_like_real
@@ -24,20 +24,20 @@ from .search import SimOptConfig, initial_gaussian, search
 
 
 class SimOpt(InferenceMethod):
-    def __init__(self, cfg: SimOptConfig, comp):
-        self.cfg, self.comp = cfg, comp
-        self.samples = comp.rc.collect.trajectories // cfg.updates
+    def __init__(self, cfg: SimOptConfig, inputs: MethodInputs):
+        self.cfg, self.inputs = cfg, inputs
+        self.samples = inputs.rc.collect.trajectories // cfg.updates
         if self.samples < 2:
-            raise ConfigError(f"method=simopt: collect.trajectories={comp.rc.collect.trajectories} over "
+            raise ConfigError(f"method=simopt: collect.trajectories={inputs.rc.collect.trajectories} over "
                               f"{cfg.updates} updates leaves fewer than 2 parameter samples per update")
-        self.low, self.high = comp.prior.low.double(), comp.prior.high.double()
+        self.low, self.high = inputs.prior.low.double(), inputs.prior.high.double()
 
     def stages(self) -> list[Stage]:
         return [Stage("search", self.search, inputs=("real",))]
 
     def start(self, ctx: RoundContext) -> Gaussian:
         if ctx.round == 1:
-            return initial_gaussian(self.comp.prior.mean, self.comp.prior.stddev, self.low, self.high, self.cfg.min_std)
+            return initial_gaussian(self.inputs.prior.mean, self.inputs.prior.stddev, self.low, self.high, self.cfg.min_std)
         previous = ctx.output("search", ctx.round - 1)
         return Gaussian(previous["mean"], previous["cov"])
 
@@ -47,12 +47,12 @@ class SimOpt(InferenceMethod):
 
     def search(self, ctx: RoundContext) -> dict:
         real = real_trajectories(ctx)
-        discrepancy = Discrepancy(self.cfg.discrepancy, self.comp.task.obs_names, real.states)
-        policy = self.comp.policy(ctx.seed, ctx)
+        discrepancy = Discrepancy(self.cfg.discrepancy, self.inputs.task.obs_names, real.states)
+        policy = self.inputs.policy(ctx.seed, ctx)
         seeds = iter(np.random.SeedSequence(ctx.seed).generate_state(self.cfg.updates).tolist())
 
         def cost(theta: torch.Tensor) -> torch.Tensor:
-            return discrepancy(simulate_like_real(self.comp.sims, theta, real, policy, self.cfg.rollout, next(seeds)))
+            return discrepancy(simulate_like_real(self.inputs.sims, theta, real, policy, self.cfg.rollout, next(seeds)))
 
         gaussians, history = search(self.start(ctx), cost, self.cfg, self.samples, self.low, self.high,
                                     torch.Generator().manual_seed(ctx.seed))
@@ -68,7 +68,7 @@ class SimOpt(InferenceMethod):
             raise PosteriorError(f"round {round_index}: SimOpt's Gaussian: {exc}") from exc
 
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
-        return ctx.output("search")["posterior"]
+        return searched(ctx, self.inputs.prior)
 
     def record(self, ctx: RoundContext) -> dict:
         out = ctx.output("search")
@@ -81,5 +81,10 @@ class SimOpt(InferenceMethod):
         }
 
 
-def simopt(cfg: SimOptConfig, comp) -> SimOpt:
-    return SimOpt(cfg, comp)
+def simopt(cfg: SimOptConfig, inputs: MethodInputs) -> SimOpt:
+    return SimOpt(cfg, inputs)
+
+
+def searched(ctx: RoundContext, prior: ParameterDistribution) -> ParameterDistribution:
+    """The round's final Gaussian, truncated to the prior's box, from its search artifact (registry: posterior)."""
+    return ctx.output("search")["posterior"]

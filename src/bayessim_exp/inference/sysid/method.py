@@ -22,7 +22,7 @@ from ...distributions.mixture import GaussianMixture, TruncatedMixture
 from ...errors import ConfigError, PosteriorError
 from ...stages import RoundContext, Stage
 from ...tasks.base import Task
-from ..base import InferenceMethod, real_trajectories
+from ..base import InferenceMethod, MethodInputs, real_trajectories
 from .fit import INTERVAL_ALPHA, SysidConfig, interval_quantile, require_sysid
 from .laplace import laplace_gaussian
 from .residual import ReplayResidual
@@ -32,34 +32,34 @@ log = logging.getLogger(__name__)
 
 
 class Sysid(InferenceMethod):
-    def __init__(self, cfg: SysidConfig, comp):
+    def __init__(self, cfg: SysidConfig, inputs: MethodInputs):
         require_sysid()
-        task = comp.task
+        task = inputs.task
         if type(task).state_from_observation is Task.state_from_observation:
             raise ConfigError(f"method=sysid replays the real trajectories from their recorded initial states, and task "
                               f"{task.name} cannot map an observation to a simulator state "
                               "(Task.state_from_observation); use method=bayessim or method=simopt")
-        self.cfg, self.comp = cfg, comp
-        self.low, self.high = comp.prior.low.double(), comp.prior.high.double()
+        self.cfg, self.inputs = cfg, inputs
+        self.low, self.high = inputs.prior.low.double(), inputs.prior.high.double()
 
     def stages(self) -> list[Stage]:
         return [Stage("fit", self.fit, inputs=("real",))]
 
     def proposal(self, ctx: RoundContext) -> ParameterDistribution:
         """What the round starts from: the prior, then the previous round's distribution (sysid draws nothing from it)."""
-        return self.comp.prior if ctx.round == 1 else ctx.output("fit", ctx.round - 1)["posterior"]
+        return self.inputs.prior if ctx.round == 1 else ctx.output("fit", ctx.round - 1)["posterior"]
 
     def fit(self, ctx: RoundContext) -> dict:
         real = real_trajectories(ctx)
-        spec = self.comp.task.spec
-        residual = ReplayResidual(self.comp.sims, real, spec.low, spec.high, self.cfg.observed)
+        spec = self.inputs.task.spec
+        residual = ReplayResidual(self.inputs.sims, real, spec.low, spec.high, self.cfg.observed)
         if ctx.round == 1:
-            start = ((self.comp.prior.mean.double() - self.low) / (self.high - self.low)).numpy()
+            start = ((self.inputs.prior.mean.double() - self.low) / (self.high - self.low)).numpy()
         else:
             start = ctx.output("fit", ctx.round - 1)["estimate_unit"]
-        starts = start_points(residual, start, self.comp.prior, self.cfg, torch.Generator().manual_seed(ctx.seed))
+        starts = start_points(residual, start, self.inputs.prior, self.cfg, torch.Generator().manual_seed(ctx.seed))
         result = best_fit(residual, spec.names, starts, self.cfg)
-        gaussian = laplace_gaussian(result, self.comp.prior.mean, self.comp.prior.stddev, self.low, self.high,
+        gaussian = laplace_gaussian(result, self.inputs.prior.mean, self.inputs.prior.stddev, self.low, self.high,
                                     self.cfg.min_noise_std, self.cfg.identified_below)
         # residuals about as large as the observations' spread: no start reached parameters that explain the data
         # (or the model cannot), and a Gaussian around this estimate would be confidently wrong
@@ -68,7 +68,7 @@ class Sysid(InferenceMethod):
             log.warning("round %d: sysid's best fit leaves residuals of %.3g of the observations' spread (method."
                         "max_noise_std=%g); the round hands on the prior", ctx.round, math.sqrt(result.noise_var),
                         self.cfg.max_noise_std)
-            posterior = self.comp.prior
+            posterior = self.inputs.prior
         else:
             try:
                 posterior = TruncatedMixture(GaussianMixture(torch.zeros(1), gaussian.mean[None], gaussian.cov[None]),
@@ -85,11 +85,11 @@ class Sysid(InferenceMethod):
         }
 
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
-        return ctx.output("fit")["posterior"]
+        return fitted(ctx, self.inputs.prior)
 
     def record(self, ctx: RoundContext) -> dict:
         out = ctx.output("fit")
-        names = self.comp.task.spec.names
+        names = self.inputs.task.spec.names
         # sysid's confidence intervals at the noise used; None: not identifiable from the data
         half = [float(v) if math.isfinite(v) else None for v in (out["interval_quantile"] * out["data_std"]).tolist()]
         return {
@@ -108,5 +108,11 @@ class Sysid(InferenceMethod):
         }
 
 
-def sysid(cfg: SysidConfig, comp) -> Sysid:
-    return Sysid(cfg, comp)
+def sysid(cfg: SysidConfig, inputs: MethodInputs) -> Sysid:
+    return Sysid(cfg, inputs)
+
+
+def fitted(ctx: RoundContext, prior: ParameterDistribution) -> ParameterDistribution:
+    """The round's Gaussian around its estimate (or the prior it handed on), from its fit artifact (registry:
+    posterior)."""
+    return ctx.output("fit")["posterior"]

@@ -18,7 +18,7 @@ from bayessim_exp.policies import RandomPolicy
 
 
 def batched(task, envs, horizon, nthread):
-    params = np.repeat(task.real_values[None], envs, 0)
+    params = np.repeat(task.true_params[None], envs, 0)
     sim = registry.build("sim", {"name": "native", "nthread": nthread})(task, envs)
     t0 = time.perf_counter()
     sim.rollout(params, RandomPolicy(task.action_dim, 0), horizon, seed=0)

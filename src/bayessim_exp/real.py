@@ -80,7 +80,7 @@ class SurrogateReal:
             draw = prior.sample((1,), generator=torch.Generator().manual_seed(stage_seed(seed, 0, "truth")))
             self.true_params: np.ndarray | None = draw[0].double().numpy()
         else:
-            self.true_params = task.real_values
+            self.true_params = task.true_params
 
     def check(self, horizon: int) -> None:
         """Nothing to check: the task's config was validated when it was built."""

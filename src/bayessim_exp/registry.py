@@ -54,8 +54,7 @@ def _same_module(module: str, factory: str, params: str, posterior: str | None =
     return Builtin(f"{module}:{factory}", f"{module}:{params}", None if posterior is None else f"{module}:{posterior}")
 
 
-# group -> option -> a built-in by import path, or the Entry that `register` gave (a plugin's; the modules of
-# tasks/, sim/, models/ and inference/bayessim/ still register themselves on import too, to the same effect)
+# group -> option -> a built-in by import path, or the Entry that `register` gave (a plugin's)
 _REGISTRY: dict[str, dict[str, Entry | Builtin]] = {
     "task": {
         "Pendulum": _same_module("tasks.pendulum", "Pendulum", "PendulumConfig"),

@@ -5,6 +5,7 @@ import json
 import textwrap
 
 import pytest
+import torch
 from omegaconf import OmegaConf, open_dict
 from run_results import without_seconds
 
@@ -104,6 +105,52 @@ def test_method_and_backend_from_outside_the_package(compose, tmp_path, monkeypa
     assert results["method"] == "rejection" and last["accepted"] == 50
     assert set(last["seconds"]) == {"real", "simulate", "accept", "score"}
     assert last["log_prob_gain"] > 0  # 50 nearest of 500 prior draws know something about the pendulum
+
+
+# A researcher's collect policy: full actuation whose sign flips every `period` control steps.
+POLICY_PLUGIN = textwrap.dedent('''
+    import dataclasses
+
+    import torch
+
+    from bayessim_exp.registry import register
+
+
+    @dataclasses.dataclass
+    class BangBangConfig:
+        period: int  # control steps between sign flips
+
+
+    class BangBang:
+        def __init__(self, period, action_dim):
+            self.period, self.action_dim = period, action_dim
+
+        def act(self, obs, t):
+            sign = 1.0 if (t // self.period) % 2 == 0 else -1.0
+            return torch.full((obs.shape[0], self.action_dim), sign)
+
+
+    @register("policy", "bang_bang", BangBangConfig)
+    def bang_bang(cfg, action_dim, **_):
+        return BangBang(cfg.period, action_dim)
+''')
+
+
+def test_collect_policy_from_outside_the_package(compose, tmp_path, monkeypatch):
+    from bayessim_exp.artifacts import RunDir
+
+    (tmp_path / "mylab_bang_bang.py").write_text(POLICY_PLUGIN)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    cfg = compose(SMOKE + ["plugins=[mylab_bang_bang]", "rounds=1"])
+    with open_dict(cfg):
+        cfg.policy = OmegaConf.create({"name": "bang_bang", "period": 5})
+    results = Pipeline(cfg, tmp_path / "run").run()
+    assert results["policy"] == "bang_bang"
+    # the real system and the simulations were both driven by it
+    actions = RunDir(tmp_path / "run").load(1, "real")["traj"]["actions"]
+    steps = torch.arange(actions.shape[1])
+    assert torch.equal(actions[0, :, 0], torch.where((steps // 5) % 2 == 0, 1.0, -1.0))
+    assert results["rounds"][-1]["train_set_size"] > 0
 
 
 def test_untruncated_gaussian_prior_runs(compose, tmp_path):

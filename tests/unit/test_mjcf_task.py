@@ -78,7 +78,7 @@ def test_the_default_yaml_is_the_shipped_arm_and_its_parameters_change_the_traje
                               "tip_pos_2")
     assert task.action_names == ("shoulder_motor", "elbow_motor") and task.action_dim == 2
     assert task.frame_skip == 4 and task.spec.names == ["elbow_damping", "forearm_mass"]
-    np.testing.assert_allclose(task.real_values, [0.1, 0.5])  # real_params {}: the MJCF as written
+    np.testing.assert_allclose(task.true_params, [0.1, 0.5])  # real_params {}: the MJCF as written
     params = np.array([[0.1, 0.5], [0.5, 0.5], [0.1, 1.0]])
     start = task.reset_state(np.random.default_rng(0), 1)
     state = {k: np.repeat(v, 3, 0) for k, v in start.items()}

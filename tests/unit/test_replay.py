@@ -24,8 +24,8 @@ def _pool(task):
 def test_the_state_recovered_from_an_observation_reproduces_it(compose, name):
     task = _task(compose, name)
     sim = _pool(task).get(6)
-    obs = sim.reset(np.repeat(task.real_values[None], 6, 0), None, seed=0).double().numpy()
-    again = sim.reset(np.repeat(task.real_values[None], 6, 0), None, seed=1, state=task.state_from_observation(obs))
+    obs = sim.reset(np.repeat(task.true_params[None], 6, 0), None, seed=0).double().numpy()
+    again = sim.reset(np.repeat(task.true_params[None], 6, 0), None, seed=1, state=task.state_from_observation(obs))
     np.testing.assert_allclose(again.numpy(), obs, atol=1e-6)  # observations are float32
 
 
@@ -33,7 +33,7 @@ def test_a_task_without_the_hook_says_so(compose):
     task = _task(compose, "Ant")
     assert task.state_from_observation(np.zeros((1, task.obs_dim))) is None
     with pytest.raises(ValueError, match="Ant cannot map an observation"):
-        replay(_pool(task), torch.as_tensor(task.real_values)[None], _recorded(task, task.real_values, n=1), torch.arange(1))
+        replay(_pool(task), torch.as_tensor(task.true_params)[None], _recorded(task, task.true_params, n=1), torch.arange(1))
 
 
 def _recorded(task, params, n=3, horizon=20, seed=0):

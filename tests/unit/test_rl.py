@@ -46,7 +46,7 @@ def test_diverged_slot_is_terminated(compose):
     from bayessim_exp.rl.env import SimulatorEnv, fixed_params
 
     task, sim = pendulum_sim(compose, 2)
-    env = SimulatorEnv(sim, fixed_params(task.real_values), seed=0)
+    env = SimulatorEnv(sim, fixed_params(task.true_params), seed=0)
     env.reset()
     sim.diverged[1] = True  # as a backend reports a breakdown
     out = env.step(TensorDict({"action": torch.zeros(2, 1)}, [2]))

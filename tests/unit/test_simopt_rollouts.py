@@ -16,7 +16,7 @@ def setup(compose, name, chunk=4):
     cfg = compose([f"task={name}"])
     task = registry.build("task", cfg.task)
     sims = SimulatorPool(registry.build("sim", cfg.sim), task, chunk)
-    real = sims.get(3).rollout(np.repeat(task.real_values[None], 3, 0), RandomPolicy(task.action_dim, 0), 20, 5)
+    real = sims.get(3).rollout(np.repeat(task.true_params[None], 3, 0), RandomPolicy(task.action_dim, 0), 20, 5)
     return task, sims, real
 
 
@@ -24,7 +24,7 @@ def setup(compose, name, chunk=4):
 def test_replay_at_the_true_parameters_reproduces_every_real_trajectory(compose, name):
     task, sims, real = setup(compose, name)
     other = task.spec.low + 0.3 * (task.spec.high - task.spec.low)
-    theta = torch.as_tensor(np.stack([other, task.real_values, other]))
+    theta = torch.as_tensor(np.stack([other, task.true_params, other]))
     obs = simulate_like_real(sims, theta, real, None, "recorded", seed=1)  # 9 rows in chunks of 4
     assert obs.shape == (3, 3, 21, task.obs_dim)
     torch.testing.assert_close(obs[1], real.states.double(), atol=1e-5, rtol=0)
@@ -34,7 +34,7 @@ def test_replay_at_the_true_parameters_reproduces_every_real_trajectory(compose,
 
 def test_closed_loop_starts_from_the_real_states_with_the_given_policy(compose):
     task, sims, real = setup(compose, "Pendulum")
-    obs = simulate_like_real(sims, torch.as_tensor(task.real_values[None]), real, RandomPolicy(1, 9), "closed_loop", 1)
+    obs = simulate_like_real(sims, torch.as_tensor(task.true_params[None]), real, RandomPolicy(1, 9), "closed_loop", 1)
     torch.testing.assert_close(obs[0, :, 0], real.states[:, 0].double(), atol=1e-6, rtol=0)
     assert (obs[0] - real.states.double()).abs().max() > 1e-3  # fresh action noise
 
@@ -43,7 +43,7 @@ def test_a_task_that_cannot_restart_from_observations_uses_its_reset_distributio
     task, sims, real = setup(compose, "Pendulum")
     monkeypatch.setattr(task, "state_from_observation", lambda obs: None)
     with caplog.at_level(logging.WARNING):
-        obs = simulate_like_real(sims, torch.as_tensor(task.real_values[None]), real, None, "recorded", 1)
+        obs = simulate_like_real(sims, torch.as_tensor(task.true_params[None]), real, None, "recorded", 1)
     assert "cannot restart from an observed state" in caplog.text
     assert (obs[0, :, 0] - real.states[:, 0].double()).abs().max() > 1e-3
 
@@ -59,7 +59,7 @@ def test_a_short_last_chunk_runs_padded_in_the_chunk_sized_simulator(compose):
     task, _, real = setup(compose, "Pendulum")
     config = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
     sims = SimulatorPool(lambda t, n: CompilingNative(t, n, config), task, 4)
-    theta = torch.as_tensor(np.repeat(task.real_values[None], 3, 0))
+    theta = torch.as_tensor(np.repeat(task.true_params[None], 3, 0))
     obs = simulate_like_real(sims, theta, real, None, "recorded", seed=1)
     assert sorted(sims._sims) == [4]
     torch.testing.assert_close(obs[2], real.states.double(), atol=1e-5, rtol=0)

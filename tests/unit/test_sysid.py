@@ -31,7 +31,7 @@ def pendulum(compose, extra=(), trajectories=2, horizon=50, noise=0.0):
     task = registry.build("task", cfg.task)
     prior = registry.build("prior", cfg.prior, spec=task.spec)
     sims = SimulatorPool(registry.build("sim", cfg.sim), task, 64)
-    real = sims.get(trajectories).rollout(np.repeat(task.real_values[None], trajectories, 0),
+    real = sims.get(trajectories).rollout(np.repeat(task.true_params[None], trajectories, 0),
                                           RandomPolicy(task.action_dim, 0), horizon, 5)
     if noise > 0:
         states = real.states.clone()
@@ -54,7 +54,7 @@ def identify(cfg, task, prior, sims, real):
 def test_noisy_observations_give_the_truth_within_a_few_stated_standard_deviations(compose):
     cfg, task, prior, sims, real = pendulum(compose, noise=0.05)
     result, gaussian = identify(cfg, task, prior, sims, real)
-    truth = torch.as_tensor(task.real_values)
+    truth = torch.as_tensor(task.true_params)
     std = gaussian.cov.diagonal().sqrt()
     z = (gaussian.mean - truth) / std
     assert z.abs().max() < 4, z
@@ -71,7 +71,7 @@ def test_noise_free_observations_give_the_truth_and_the_floored_noise(compose):
     cfg, task, prior, sims, real = pendulum(compose)
     result, gaussian = identify(cfg, task, prior, sims, real)
     estimate = torch.as_tensor(result.estimate) * (prior.high - prior.low) + prior.low
-    torch.testing.assert_close(estimate, torch.as_tensor(task.real_values), atol=1e-6, rtol=0)
+    torch.testing.assert_close(estimate, torch.as_tensor(task.true_params), atol=1e-6, rtol=0)
     assert result.noise_var ** 0.5 < 1e-6  # float32 rounding: what the floor is for
     assert gaussian.noise_std == cfg.method.min_noise_std
     # the floor, not float32 rounding, sets the spread: still far below the prior's
@@ -81,7 +81,7 @@ def test_noise_free_observations_give_the_truth_and_the_floored_noise(compose):
 def test_a_fit_stuck_in_a_local_minimum_from_the_prior_mean_is_left_for_a_screened_start(compose):
     # this truth and excitation: Gauss-Newton from the prior's mean stops with residuals as large as the signal
     cfg, task, prior, sims, _ = pendulum(compose, ["task.real_params.mass=0.598", "task.real_params.length=0.390"])
-    real = sims.get(1).rollout(task.real_values[None], RandomPolicy(1, 3), 50, 5)
+    real = sims.get(1).rollout(task.true_params[None], RandomPolicy(1, 3), 50, 5)
     _, sysid_cfg = registry.parse_params("method", cfg.method)
     residual = ReplayResidual(sims, real, task.spec.low, task.spec.high, None)
     mean = ((prior.mean - prior.low) / (prior.high - prior.low)).numpy()
@@ -90,7 +90,7 @@ def test_a_fit_stuck_in_a_local_minimum_from_the_prior_mean_is_left_for_a_screen
     starts = start_points(residual, mean, prior, sysid_cfg, torch.Generator().manual_seed(0))
     assert len(starts) == sysid_cfg.starts and (starts[0] == mean).all()
     found = best_fit(residual, task.spec.names, starts, sysid_cfg)
-    np.testing.assert_allclose(residual.theta(found.estimate), task.real_values, atol=1e-6)
+    np.testing.assert_allclose(residual.theta(found.estimate), task.true_params, atol=1e-6)
 
 
 def test_a_parameter_no_observation_depends_on_keeps_the_prior_spread(compose):
@@ -104,7 +104,7 @@ def test_a_parameter_no_observation_depends_on_keeps_the_prior_spread(compose):
     assert float(gaussian.mean[c]) == pytest.approx(float(prior.mean[c]), abs=1e-9)
     torch.testing.assert_close(gaussian.cov[c, :c], torch.zeros(c, dtype=torch.float64), atol=1e-12, rtol=0)
     # the others are identified as without it
-    truth = torch.as_tensor(task.real_values)
+    truth = torch.as_tensor(task.true_params)
     std = gaussian.cov.diagonal().sqrt()
     assert ((gaussian.mean - truth) / std)[:c].abs().max() < 4
 
@@ -120,7 +120,7 @@ def test_parameters_that_only_trade_off_against_each_other_keep_the_prior_spread
     assert gaussian.identified.tolist() == [False, True, False]
     torch.testing.assert_close(gaussian.cov.diagonal().sqrt()[[0, 2]], prior.stddev[[0, 2]].double())
     assert float(gaussian.cov[0, 2]) == 0.0
-    z = (gaussian.mean - torch.as_tensor(task.real_values)) / gaussian.cov.diagonal().sqrt()
+    z = (gaussian.mean - torch.as_tensor(task.true_params)) / gaussian.cov.diagonal().sqrt()
     assert z.abs().max() < 3
 
 

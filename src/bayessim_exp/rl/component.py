@@ -101,17 +101,16 @@ class PPOComponent:
         return agent.actor
 
     def evaluate(self, ctx: RoundContext) -> dict:
-        real_params = self.true_params
-        if real_params is None:
+        if self.true_params is None:
             log.warning("round %d: the real data source has no true parameters: no surrogate-real evaluation", ctx.round)
             return {"summary": None, "video": None}
         actor = self._actor(ctx.output("train_policy")["trainer"])
         e = self.cfg.evaluate
-        returns = episode_returns(actor, self.sims.get(e.episodes), real_params, ctx.seed)
+        returns = episode_returns(actor, self.sims.get(e.episodes), self.true_params, ctx.seed)
         out = {"returns": returns, "summary": summary(returns), "video": None}
         if e.video_steps:
             policy = ActorPolicy(actor, self.task.action_dim, ctx.seed, random_share=0.0)
-            out["video"], why = render_gif(self.task, real_params, policy, e.video_steps, e.video_size, ctx.seed)
+            out["video"], why = render_gif(self.task, self.true_params, policy, e.video_steps, e.video_size, ctx.seed)
             if out["video"] is None:
                 log.warning("round %d: no video of the policy: %s", ctx.round, why)
         if ctx.tb is not None and out["video"] is not None:  # the returns reach TensorBoard through record()

@@ -109,7 +109,9 @@ class Task:
         return len(self.actuators)
 
     @property
-    def real_values(self) -> np.ndarray:
+    def true_params(self) -> np.ndarray:
+        """The surrogate real system's parameters as the task's YAML gives them (real_params, the nominal where left
+        out), in spec order; real=surrogate's `truth=prior` draws others."""
         values = self.cfg.real_param_values()
         return np.array([values[n] for n in self.spec.names])
 

@@ -92,10 +92,13 @@ def test_bad_targets_name_the_closest_valid_names(model, target, message):
     assert message in str(err.value)
 
 
-def test_bad_operation_range_and_distribution(model):
+def test_bad_operation_range_and_keys(model):
     with pytest.raises(ConfigError, match="operation 'scale' not allowed; allowed: scaling, additive, set"):
         spec_of(model, p={"range": [0, 1], "operation": "scale", "targets": ["body_mass[lower]"]})
     with pytest.raises(ConfigError, match="low < high"):
         spec_of(model, p={"range": [2, 1], "targets": ["body_mass[lower]"]})
-    with pytest.raises(ConfigError, match="loguniform range must be positive"):
-        spec_of(model, p={"range": [0, 1], "distribution": "loguniform", "targets": ["body_mass[lower]"]})
+    # a per-parameter family would be silently ignored: the prior group chooses it for every range
+    with pytest.raises(ConfigError, match="'distribution' is not a parameter key; the prior config group"):
+        spec_of(model, p={"range": [1, 2], "distribution": "loguniform", "targets": ["body_mass[lower]"]})
+    with pytest.raises(ConfigError, match=r"unknown keys \['rnage'\]; allowed: range, targets, operation, nominal"):
+        spec_of(model, p={"rnage": [1, 2], "range": [1, 2], "targets": ["body_mass[lower]"]})

@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from ..errors import ConfigError
-from .params import ParamConfig, ParamSpec, nominal_value
+from .params import ParamConfig, ParamSpec, nominal_value, param_config
 
 ASSETS = Path(__file__).parent / "assets"
 
@@ -49,7 +49,7 @@ class TaskConfig:
         """Every parameter's surrogate-real value: real_params where given, else the nominal value."""
         out = {}
         for name, raw in self.parameters.items():
-            p = raw if isinstance(raw, ParamConfig) else ParamConfig(**raw)
+            p = param_config(name, raw)
             out[name] = float(self.real_params.get(name, nominal_value(p.operation, p.nominal)))
         return out
 

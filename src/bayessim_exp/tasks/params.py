@@ -1,7 +1,7 @@
 """ParamSpec: named physical parameters bound to MuJoCo model fields, written per environment.
 
-A parameter (IsaacGym-style) has a range (the prior's support), a distribution, an operation
-and one or more targets. A target names a model field and the entries it touches:
+A parameter (IsaacGym-style) has a range (the prior's support), an operation and one or more targets; the
+prior's family over the ranges is the `prior` config group's choice. A target names a model field and the entries it touches:
 
     body_mass[pole]            every entry of the row of body 'pole'
     body_inertia[pole,1]       one column of that row
@@ -38,7 +38,6 @@ SET_CONST_INPUTS = frozenset({
     "geom_gap", "site_pos", "site_quat", "tendon_stiffness", "tendon_damping", "tendon_armature", "wrap_prm",
     "actuator_gear", "actuator_cranklength", "actuator_damping", "actuator_armature", "eq_data",
 })
-DISTRIBUTIONS = ("uniform", "loguniform", "gaussian")
 
 # field prefix -> (object type, count attribute of MjModel)
 _PREFIX_OBJECT = {
@@ -68,8 +67,21 @@ class ParamConfig:
     range: list[float]
     targets: list[Any]
     operation: str = "scaling"
-    distribution: str = "uniform"
     nominal: float = 1.0
+
+
+def param_config(name: str, raw: Any) -> ParamConfig:
+    """A task YAML's entry for parameter `name`, its keys checked."""
+    if isinstance(raw, ParamConfig):
+        return raw
+    allowed = [f.name for f in dataclasses.fields(ParamConfig)]
+    unknown = [k for k in raw if k not in allowed]
+    if "distribution" in unknown:
+        raise ConfigError(f"parameter {name!r}: 'distribution' is not a parameter key; the prior config group "
+                          "chooses the family over every range (prior=uniform, loguniform or gaussian)")
+    if unknown:
+        raise ConfigError(f"parameter {name!r}: unknown keys {unknown}; allowed: {', '.join(allowed)}")
+    return ParamConfig(**raw)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,7 +110,6 @@ class Param:
     low: float
     high: float
     operation: str
-    distribution: str
     nominal: float
     targets: tuple[Target, ...]
 
@@ -130,8 +141,7 @@ class ParamSpec:
     def from_config(cls, parameters: dict[str, Any], model: mujoco.MjModel) -> ParamSpec:
         params = []
         for name, raw in parameters.items():
-            cfg = raw if isinstance(raw, ParamConfig) else ParamConfig(**raw)
-            params.append(_parse_param(name, cfg, model))
+            params.append(_parse_param(name, param_config(name, raw), model))
         return cls(params)
 
     def subset(self, names: Iterable[str]) -> ParamSpec:
@@ -218,21 +228,15 @@ def _parse_param(name: str, cfg: ParamConfig, model: mujoco.MjModel) -> Param:
     where = f"parameter {name!r}"
     if cfg.operation not in OPERATIONS:
         raise ConfigError(f"{where}: operation {cfg.operation!r} not allowed; allowed: {', '.join(OPERATIONS)}")
-    if cfg.distribution not in DISTRIBUTIONS:
-        raise ConfigError(
-            f"{where}: distribution {cfg.distribution!r} not allowed; allowed: {', '.join(DISTRIBUTIONS)}"
-        )
     if len(cfg.range) != 2 or not cfg.range[0] < cfg.range[1]:
         raise ConfigError(f"{where}: range must be [low, high] with low < high, got {list(cfg.range)}")
     if cfg.operation == "scaling" and cfg.nominal <= 0:
         raise ConfigError(f"{where}: a scaling parameter needs nominal > 0, got {cfg.nominal}")
-    if cfg.distribution == "loguniform" and cfg.range[0] <= 0:
-        raise ConfigError(f"{where}: a loguniform range must be positive, got {list(cfg.range)}")
     if not cfg.targets:
         raise ConfigError(f"{where}: no targets")
     targets = tuple(_parse_target(where, t, model) for t in cfg.targets)
-    return Param(name, float(cfg.range[0]), float(cfg.range[1]), cfg.operation, cfg.distribution,
-                 float(cfg.nominal), targets)
+    return Param(name, float(cfg.range[0]), float(cfg.range[1]), cfg.operation, float(cfg.nominal),
+                 targets)
 
 
 def _parse_target(where: str, raw: Any, model: mujoco.MjModel) -> Target:

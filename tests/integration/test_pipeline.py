@@ -172,7 +172,7 @@ def test_truncation_that_cannot_be_sampled_falls_back_to_the_prior(compose, tmp_
     def refuse(*args, **kwargs):
         raise ValueError("the previous posterior's 99.9% region holds 1e-30 of the prior's mass")
 
-    monkeypatch.setattr("bayessim_exp.inference.bayessim.method.TruncatedPrior", refuse)
+    monkeypatch.setattr("bayessim_exp.inference.bayessim.proposals.TruncatedPrior", refuse)
     results = Pipeline(compose(MECHANICS + ["method.proposal=truncated"]), tmp_path).run()
     assert [r["proposal"] for r in results["rounds"]] == ["prior", "prior"]
     assert "round 2: the previous posterior's 99.9% region" in caplog.text

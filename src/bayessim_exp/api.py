@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
 from . import registry
 from .artifacts import RunDir
@@ -29,6 +29,8 @@ from .distributions.probit import ProbitTransform
 from .errors import DataFileError
 from .inference.bayessim.condition import condition
 from .inference.bayessim.correction import MAX_COMPONENTS
+from .run_config import check_run_config
+from .stages import RoundContext
 
 __all__ = ["BoxUniform", "GaussianPrior", "LogUniform", "FittedPosterior", "fit_posterior_model", "run", "load_run", "compose"]
 
@@ -118,14 +120,11 @@ def run(overrides: list[str] | None = None, out_dir: str | Path | None = None) -
 class Run:
     path: Path
     results: dict
-    config: Any
+    config: DictConfig  # the run's config.yaml
 
     def posterior(self, round_index: int | None = None) -> ParameterDistribution:
         """The distribution a finished round ended with (the last round by default), read by the method's reader
         (registry: posterior) from the round's artifacts and the prior: no simulator, summarizer or model is built."""
-        from .run_config import check_run_config
-        from .stages import RoundContext
-
         r = round_index or len(self.results["rounds"])
         rc = check_run_config(self.config)
         registry.load_plugins(rc.plugins)

@@ -1,31 +1,35 @@
-"""PPO training throughput and Cartpole's wall time to 95 % of the maximum return.
+"""PPO training throughput per collection path, and Cartpole's wall time to 95 % of the maximum return.
 
-    OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/rl.py                      # CPU, native backend
-    python benchmarks/rl.py --steps 262144 --overrides sim=mjx device=cuda rl.train.num_envs=4096 \
-        rl.train.rollout_steps=16 rl.train.minibatch_size=16384 rl.train.total_steps=3000000  # GPU (docs/benchmarks.md)
+    OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/rl.py                  # CPU, native backend, task settings
+    python benchmarks/rl.py --tasks Cartpole Ant --overrides sim=mjx device=cuda rl.train.num_envs=8192 \
+        rl.train.rollout_steps=16 rl.train.minibatch_size=32768 rl.train.epochs=5   # GPU (docs/benchmarks.md)
 
-Throughput, per task: environment steps per second of (1) `Simulator.rollout` with random actions
-(the simulator alone, the baseline), (2) torchrl's Collector over SimulatorEnv with PPO's actor (the
-environment wrapper and the policy, no learning) and (3) PPO training, updates included, with the
-task's rl=ppo settings (conf/rl/ppo.yaml, conf/rl_task). Then Cartpole's PPO with its own settings
-until the mean return of the episodes finished in a batch reaches 95 % of the 500 an episode can earn,
-within its budget (its rl.train.total_steps, or one given in --overrides). Step counts are rounded up to
-whole PPO batches (num_envs x rollout_steps): with 4,096 environments of 32 steps a batch is 131,072 steps,
-more than the 32,768 of a default measurement or Cartpole's budget of 80,000.
+Rows per task, environment steps per second:
+  simulator   `Simulator.rollout` with open-loop random actions: the simulator alone, the baseline
+  compiled    PPO incl. updates, the actor inside MJX's compiled rollout (rl/compiled_collection.py; MJX only)
+  stepwise    PPO incl. updates, torchrl's Collector stepping SimulatorEnv (one simulator and one actor call per step)
+Each PPO figure is one timed `train` call of `--steps` steps (`--stepwise-steps` for the stepwise path, slow on a
+GPU) after an untimed call of one batch on the same simulator: that first call compiles, and its time beyond a
+timed batch's is reported as compilation. Cartpole's run to 95 % of the 500 an episode can earn (the mean return
+of the training episodes finished in a batch) uses the same settings, within `--solve-steps` steps, on the
+collection path `rl.train.collector` picks, after the same untimed first batch. Step counts are rounded up to
+whole PPO batches (num_envs x rollout_steps).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import numpy as np
 import torch
 
+PATHS = ("compiled", "stepwise")
 
-def components(task: str, overrides: list[str], steps: int | None = None):
-    """The task's run with rl=ppo; PPO's total_steps (`steps`, else the configured budget) rounded up to whole
-    batches, which PPO's config requires."""
+
+def components(task: str, overrides: list[str], steps: int):
+    """The task's run with rl=ppo on its nominal model, PPO's total_steps `steps` rounded up to whole batches."""
     from bayessim_exp import api
     from bayessim_exp.components import build_components, build_rl
     from bayessim_exp.run_config import check_run_config
@@ -33,87 +37,116 @@ def components(task: str, overrides: list[str], steps: int | None = None):
     cfg = api.compose([f"task={task}", "rl=ppo", "rl.train_on=nominal", *overrides])
     train = cfg.rl.train
     batch = train.num_envs * train.rollout_steps
-    train.total_steps = -(-(steps or train.total_steps) // batch) * batch
+    train.total_steps = -(-steps // batch) * batch
     comp = build_components(cfg, check_run_config(cfg))
     return comp, build_rl(cfg, comp, lambda ctx: comp.prior)  # train_on=nominal asks for no distribution
 
 
-def throughput(task: str, steps: int, overrides: list[str]) -> dict:
-    from torchrl.collectors import Collector
+def train_once(comp, rl, collector: str, steps: int | None = None, seed: int = 0) -> dict:
+    """One PPO train call of `steps` steps (one batch when None) on the nominal model with `collector`."""
+    import dataclasses
 
-    from bayessim_exp.policies import RandomPolicy
     from bayessim_exp.rl.env import SimulatorEnv, fixed_params
+    from bayessim_exp.rl.ppo import PPOTrainer
+
+    cfg = rl.train_cfg
+    batch = cfg.num_envs * cfg.rollout_steps
+    cfg = dataclasses.replace(cfg, collector=collector, total_steps=batch if steps is None else -(-steps // batch) * batch)
+    sim = comp.sims.get(cfg.num_envs)
+    trainer = PPOTrainer(cfg, comp.task.obs_dim, comp.task.action_dim, rl.device)
+    env = SimulatorEnv(sim, fixed_params(comp.task.spec.nominal), seed, draw_steps=cfg.rollout_steps)
+    t0 = time.perf_counter()
+    curve = trainer.train(env, seed=seed)
+    return {"steps": curve["steps"][-1], "seconds": time.perf_counter() - t0, "curve": curve, "batch": batch}
+
+
+def compiled_available(comp, rl) -> bool:
+    return getattr(comp.sims.get(rl.train_cfg.num_envs), "closes_loops", False)
+
+
+def throughput(task: str, steps: int, stepwise_steps: int, overrides: list[str]) -> dict:
+    from bayessim_exp.policies import RandomPolicy
 
     comp, rl = components(task, overrides, steps)
     cfg = rl.train_cfg
     sim = comp.sims.get(cfg.num_envs)
     nominal = np.repeat(comp.task.spec.nominal[None], cfg.num_envs, 0)
-    horizon = cfg.total_steps // cfg.num_envs
-    # untimed first calls: on MJX they compile the fused rollout and the single step
-    sim.rollout(nominal, RandomPolicy(comp.task.action_dim, 0), horizon)
-    sim.reset(nominal, None, 0)
-    sim.step(torch.zeros(cfg.num_envs, comp.task.action_dim))
+    horizon = max(1, steps // cfg.num_envs)
+    sim.rollout(nominal, RandomPolicy(comp.task.action_dim, 0), horizon)  # untimed: compiles on MJX
     t0 = time.perf_counter()
     sim.rollout(nominal, RandomPolicy(comp.task.action_dim, 0), horizon)
-    rollout = cfg.num_envs * horizon / (time.perf_counter() - t0)
-
-    trainer = rl.trainer()
-    env = SimulatorEnv(sim, fixed_params(comp.task.spec.nominal), 0)
-    collector = Collector(env, trainer.actor, frames_per_batch=cfg.num_envs * cfg.rollout_steps,
-                          total_frames=cfg.total_steps, auto_register_policy_transforms=False)
-    t0, frames = time.perf_counter(), 0
-    for batch in collector:
-        frames += batch.numel()
-    collect = frames / (time.perf_counter() - t0)
-    collector.shutdown()
-
-    t0 = time.perf_counter()
-    curve = rl.trainer().train(SimulatorEnv(sim, fixed_params(comp.task.spec.nominal), 0), seed=0)
-    train = curve["steps"][-1] / (time.perf_counter() - t0)
-    return {"task": task, "envs": cfg.num_envs, "steps": curve["steps"][-1], "rollout": rollout, "collect": collect,
-            "train": train, "update_share": sum(curve["update_seconds"]) / curve["seconds"][-1]}
+    row = {"task": task, "envs": cfg.num_envs, "rollout_steps": cfg.rollout_steps, "epochs": cfg.epochs,
+           "minibatch": cfg.minibatch_size, "simulator": cfg.num_envs * horizon / (time.perf_counter() - t0)}
+    for path, n in (("compiled", steps), ("stepwise", stepwise_steps)):
+        if path == "compiled" and not compiled_available(comp, rl):
+            continue
+        first = train_once(comp, rl, path)
+        timed = train_once(comp, rl, path, n)
+        per_batch = timed["seconds"] / (timed["steps"] / timed["batch"])
+        curve = timed["curve"]
+        row[path] = {"steps": timed["steps"], "steps_per_s": timed["steps"] / timed["seconds"],
+                     "compile_s": max(0.0, first["seconds"] - per_batch),
+                     "update_share": sum(curve["update_seconds"]) / curve["seconds"][-1]}
+    return row
 
 
-def time_to_95(overrides: list[str]) -> dict:
-    from bayessim_exp.rl.env import SimulatorEnv, fixed_params
-
-    comp, rl = components("Cartpole", overrides)
+def time_to_95(overrides: list[str], budget: int) -> dict:
+    comp, rl = components("Cartpole", overrides, budget)
+    path = "compiled" if rl.train_cfg.collector != "stepwise" and compiled_available(comp, rl) else "stepwise"
+    first = train_once(comp, rl, path)
+    run = train_once(comp, rl, path, budget)
     target = 0.95 * comp.task.cfg.episode_length  # at most 1 per step
-    env = SimulatorEnv(comp.sims.get(rl.train_cfg.num_envs), fixed_params(comp.task.spec.nominal), 0)
-    curve = rl.trainer().train(env, seed=0)
+    curve = run["curve"]
     reached = [i for i, r in enumerate(curve["episode_return"]) if np.isfinite(r) and r >= target]
-    first = reached[0] if reached else None
-    return {"target": target, "seconds": None if first is None else curve["seconds"][first],
-            "steps": None if first is None else curve["steps"][first], "budget_steps": curve["steps"][-1],
-            "best": float(np.nanmax(curve["episode_return"]))}
+    first_hit = reached[0] if reached else None
+    per_batch = run["seconds"] / len(curve["steps"])
+    return {"path": path, "target": target, "budget_steps": curve["steps"][-1],
+            "seconds": None if first_hit is None else curve["seconds"][first_hit],
+            "steps": None if first_hit is None else curve["steps"][first_hit],
+            "compile_s": max(0.0, first["seconds"] - per_batch), "best": float(np.nanmax(curve["episode_return"]))}
+
+
+def print_tables(rows: list[dict], solve: dict, overrides: list[str]) -> None:
+    print(f"overrides: {' '.join(overrides) or '(none)'}; torch threads {torch.get_num_threads()}")
+    print("| task | envs x steps, epochs x minibatch | simulator alone (baseline) | PPO, compiled collection "
+          "| PPO, stepwise Collector | compilation s (compiled / stepwise) | share in updates (compiled / stepwise) |")
+    print("|---|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        c, s = r.get("compiled"), r["stepwise"]
+
+        def rate(x):
+            return "-" if x is None else f"{x['steps_per_s']:,.0f} ({x['steps_per_s'] / r['simulator']:.2f}x)"
+
+        compile_s = f"{'-' if c is None else format(c['compile_s'], '.1f')} / {s['compile_s']:.1f}"
+        share = f"{'-' if c is None else format(c['update_share'], '.0%')} / {s['update_share']:.0%}"
+        print(f"| {r['task']} | {r['envs']} x {r['rollout_steps']}, {r['epochs']} x {r['minibatch']} "
+              f"| {r['simulator']:,.0f} | {rate(c)} | {rate(s)} | {compile_s} | {share} |")
+    if solve["seconds"] is None:
+        print(f"Cartpole ({solve['path']}): 95 % of the maximum return ({solve['target']:.0f}) not reached in "
+              f"{solve['budget_steps']:,} steps (best batch mean {solve['best']:.1f})")
+    else:
+        print(f"Cartpole ({solve['path']} collection): mean training episode return >= {solve['target']:.0f} "
+              f"(95 % of the maximum) after {solve['seconds']:.1f} s and {solve['steps']:,} steps, compilation "
+              f"({solve['compile_s']:.1f} s) before it, not included")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tasks", nargs="+", default=["Cartpole", "Ant"])
-    ap.add_argument("--steps", type=int, default=32768,
-                    help="environment steps per throughput measurement, rounded up to whole PPO batches")
-    ap.add_argument("--overrides", nargs="*", default=[],
-                    help="Hydra overrides, e.g. sim=mjx device=cuda (rl.train.total_steps: the Cartpole run's budget)")
+    ap.add_argument("--steps", type=int, default=32768, help="timed PPO steps, compiled path (and the simulator's)")
+    ap.add_argument("--stepwise-steps", type=int, default=None, help="timed PPO steps, stepwise path (default --steps)")
+    ap.add_argument("--solve-steps", type=int, default=80000, help="Cartpole's budget to reach 95 %% of the maximum")
+    ap.add_argument("--overrides", nargs="*", default=[], help="Hydra overrides, e.g. sim=mjx device=cuda")
+    ap.add_argument("--json", default=None)
     args = ap.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)  # network initialisation
-    rows = [throughput(task, args.steps, args.overrides) for task in args.tasks]
-    print(f"overrides: {' '.join(args.overrides) or '(none)'}; torch threads 1")
-    print("| task | envs | steps | Simulator.rollout, random actions (baseline) | Collector + actor "
-          "| PPO incl. updates | share of PPO time in updates |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    for r in rows:
-        print(f"| {r['task']} | {r['envs']} | {r['steps']:,} | {r['rollout']:,.0f} "
-              f"| {r['collect']:,.0f} ({r['collect'] / r['rollout']:.2f}x) "
-              f"| {r['train']:,.0f} ({r['train'] / r['rollout']:.2f}x) | {r['update_share']:.0%} |")
-    t = time_to_95(args.overrides)
-    if t["seconds"] is None:
-        print(f"Cartpole: 95 % of the maximum return ({t['target']:.0f}) not reached in {t['budget_steps']:,} steps "
-              f"(best batch mean {t['best']:.1f})")
-    else:
-        print(f"Cartpole: mean training episode return >= {t['target']:.0f} (95 % of the maximum) after "
-              f"{t['seconds']:.1f} s, {t['steps']:,} steps")
+    rows = [throughput(t, args.steps, args.stepwise_steps or args.steps, args.overrides) for t in args.tasks]
+    solve = time_to_95(args.overrides, args.solve_steps)
+    print_tables(rows, solve, args.overrides)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"overrides": args.overrides, "rows": rows, "cartpole_95": solve}, f, indent=1)
 
 
 if __name__ == "__main__":

@@ -22,22 +22,33 @@ def test_env_specs_and_per_slot_parameters_at_reset(compose):
     from bayessim_exp.rl.env import SimulatorEnv
 
     task, sim = pendulum_sim(compose, 4, ["task.episode_length=5"])
-    drawn = []
+    drawn, resets = [], []
 
-    def sampler(n, generator):
-        rows = torch.tensor([[0.5 + 0.1 * len(drawn), 0.5]] * n, dtype=torch.float64)
+    def sampler(n, generator):  # row i of the k-th call: (0.5 + 0.1 k, 0.5 + 0.01 i)
+        rows = torch.tensor([[0.5 + 0.1 * len(drawn), 0.5 + 0.01 * i] for i in range(n)], dtype=torch.float64)
         drawn.append(n)
         return rows
 
-    env = SimulatorEnv(sim, sampler, seed=0)
+    reset = sim.reset
+    sim.reset = lambda params, ids, **kw: resets.append((params.clone(), ids.clone())) or reset(params, ids, **kw)
+    env = SimulatorEnv(sim, sampler, seed=0, draw_steps=3)
     check_env_specs(env)
-    drawn.clear()
+    env.set_seed(0)
+    drawn.clear(), resets.clear()
     td = env.rollout(12, break_when_any_done=False)
-    # the rollout's own reset, then every slot truncates at steps 5 and 10 and draws new parameters
+    # every slot truncates at steps 5 and 10; draws come 3 steps (12 rows) per sampler call, one step's
+    # rows for the first reset and one step's after each step
     assert td["next", "truncated"].sum().item() == 8 and not td["next", "terminated"].any()
-    assert drawn == [4, 4, 4]
+    assert drawn == [12] * 5
+    assert [ids.tolist() for _, ids in resets] == [[0, 1, 2, 3]] * 3
+    for (params, _), step in zip(resets, (0, 5, 10)):  # slot i takes row i of that step's draws
+        call, row = divmod(step, 3)
+        torch.testing.assert_close(params, torch.tensor([[0.5 + 0.1 * call, 0.5 + 0.01 * (4 * row + i)]
+                                                         for i in range(4)], dtype=torch.float64))
+    # resets without a step between them take the same step's rows: here the 12th step's (call 4, row 0)
     env.reset(env.reset().set("_reset", torch.tensor([[True], [False], [False], [True]])))
-    assert drawn[-1] == 2
+    assert resets[-1][1].tolist() == [0, 3]
+    torch.testing.assert_close(resets[-1][0], torch.tensor([[0.9, 0.5], [0.9, 0.53]], dtype=torch.float64))
 
 
 def test_diverged_slot_is_terminated(compose):

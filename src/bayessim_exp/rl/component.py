@@ -70,7 +70,8 @@ class PPOComponent:
         with torch.random.fork_rng():
             torch.manual_seed(ctx.seed)  # network initialisation and action sampling
             trainer = self.trainer(None if previous is None else previous["trainer"])
-            env = SimulatorEnv(self.sims.get(self.train_cfg.num_envs), self.sampler(ctx), ctx.seed)
+            env = SimulatorEnv(self.sims.get(self.train_cfg.num_envs), self.sampler(ctx), ctx.seed,
+                               draw_steps=self.train_cfg.rollout_steps)
             curve = trainer.train(env, ctx.seed, self._logger(ctx))
         log.info("round %d: PPO on %s, %d steps in %.1f s, last training episode return %.1f", ctx.round,
                  self.cfg.train_on, curve["steps"][-1], curve["seconds"][-1], _last_finite(curve["episode_return"]))

@@ -11,6 +11,7 @@ import dataclasses
 from ..errors import ConfigError
 
 TRAIN_ON = ("posterior", "prior", "nominal")
+COLLECTORS = ("auto", "compiled", "stepwise")
 
 
 @dataclasses.dataclass
@@ -33,8 +34,11 @@ class PPOConfig:
     hidden: list[int]
     init_log_std: float  # log std of the Gaussian actor at initialisation
     obs_clip: float  # normalised observations are clipped to +-obs_clip
+    collector: str  # auto | compiled (the actor inside MJX's compiled rollout) | stepwise (torchrl's Collector)
 
     def validate(self) -> None:
+        if self.collector not in COLLECTORS:
+            raise ConfigError(f"collector={self.collector!r} not allowed; allowed: {', '.join(COLLECTORS)}")
         if min(self.num_envs, self.rollout_steps, self.epochs, self.minibatch_size) < 1 or not self.hidden:
             raise ConfigError("num_envs, rollout_steps, epochs and minibatch_size must be >= 1, hidden non-empty")
         if self.total_steps < self.num_envs * self.rollout_steps:

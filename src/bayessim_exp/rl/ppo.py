@@ -1,7 +1,8 @@
 """PPO with torchrl (Collector, GAE, ClipPPOLoss) on a SimulatorEnv, resumable from a state dict.
 
 One `train` call collects `total_steps` environment steps (rounded down to whole batches) in batches of
-num_envs x rollout_steps; after each batch the observation normaliser takes the batch's statistics,
+num_envs x rollout_steps (on MJX compiled with the actor, rl/compiled_collection.py; elsewhere torchrl's
+Collector steps SimulatorEnv); after each batch the observation normaliser takes the batch's statistics,
 GAE computes advantages and the clipped objective is minimised for `epochs` passes over shuffled minibatches.
 """
 
@@ -17,6 +18,8 @@ from torchrl.envs.transforms import RewardSum
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
+from ..errors import ConfigError
+from .compiled_collection import CompiledCollector, can_compile
 from .config import PPOConfig
 from .env import SimulatorEnv
 from .networks import Agent
@@ -55,12 +58,7 @@ class PPOTrainer:
     def train(self, env: SimulatorEnv, seed: int, on_batch: Callable[[int, dict], None] | None = None) -> dict:
         """PPO for cfg.total_steps steps of `env`; returns the training curve (steps, mean episode return)."""
         cfg = self.cfg
-        env = TransformedEnv(env, RewardSum())
-        batch_frames = env.batch_size.numel() * cfg.rollout_steps
-        total = cfg.total_steps // batch_frames * batch_frames
-        collector = Collector(env, self.agent.actor, frames_per_batch=batch_frames, total_frames=total,
-                              auto_register_policy_transforms=False)  # a feed-forward policy needs none
-        collector.set_seed(seed)
+        collector = self._collector(env, seed)
         curve: dict[str, list[float]] = {"steps": [], "episode_return": [], "seconds": [], "update_seconds": []}
         t0 = time.perf_counter()
         for batch in collector:
@@ -80,14 +78,32 @@ class PPOTrainer:
         collector.shutdown()
         return curve
 
+    def _collector(self, env: SimulatorEnv, seed: int):
+        """The compiled collection where the simulator runs closed loops (cfg.collector: auto or compiled),
+        torchrl's Collector over the environment otherwise; both seeded before their first reset."""
+        cfg = self.cfg
+        batch_frames = env.batch_size.numel() * cfg.rollout_steps
+        total = cfg.total_steps // batch_frames * batch_frames
+        compiled = can_compile(env)
+        if cfg.collector == "compiled" and not compiled:
+            raise ConfigError("rl.train.collector=compiled needs sim=mjx (or sim=auto on a GPU) and a task whose "
+                              "resets are computed on the device; use collector=auto or stepwise")
+        if compiled and cfg.collector != "stepwise":
+            return CompiledCollector(env, self.agent, cfg.rollout_steps, total, seed)
+        env.set_seed(seed)
+        return Collector(TransformedEnv(env, RewardSum()), self.agent.actor, frames_per_batch=batch_frames,
+                         total_frames=total, auto_register_policy_transforms=False)  # a feed-forward policy needs none
+
     def _update(self, batch, seed: int) -> dict:
         cfg = self.cfg
         batch["next", "reward"] = batch["next", "reward"] * cfg.reward_scale  # value targets of order one
         with torch.no_grad():
             self.advantage(batch)
-        flat = batch.reshape(-1)
+        # only what the clipped objective reads: each minibatch gathers these rows (GAE wrote the last two)
+        flat = batch.select("observation", "action", "action_log_prob", "advantage", "value_target").reshape(-1)
         generator = torch.Generator().manual_seed(seed)
-        sums = {"loss_objective": 0.0, "loss_critic": 0.0, "loss_entropy": 0.0}
+        # summed on the device: a float() per minibatch would wait for the GPU three times per update
+        sums = {k: torch.zeros((), device=flat.device) for k in ("loss_objective", "loss_critic", "loss_entropy")}
         updates = 0
         for _ in range(cfg.epochs):
             order = torch.randperm(flat.numel(), generator=generator)
@@ -99,6 +115,6 @@ class PPOTrainer:
                 torch.nn.utils.clip_grad_norm_(self.loss.parameters(), cfg.max_grad_norm)
                 self.optim.step()
                 for k in sums:
-                    sums[k] += float(losses[k].detach())
+                    sums[k] += losses[k].detach()
                 updates += 1
-        return {k: v / updates for k, v in sums.items()}
+        return {k: float(v) / updates for k, v in sums.items()}

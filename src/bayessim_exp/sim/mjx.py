@@ -22,6 +22,7 @@ spreads NaNs nor keeps the solver iterating, and it stays flagged until its next
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 from collections.abc import Callable
 from pathlib import Path
@@ -137,6 +138,7 @@ class MjxSimulator(Simulator):
         self._step_fn = jit(self._control_step, lambda leaves, data, obs, broken, act: (data, obs, broken, 0, 0, 0))
         # one compilation per horizon (the actions' shape)
         self._rollout_fn = jit(self._scan, lambda leaves, data, obs, broken, act: (data, obs, broken, 0, 0, 0, 0, 0))
+        self._closed_loops: dict[Callable, Callable] = {}  # jitted per policy function
 
     def _jit_maker(self, names: list[str], constants: list[str], on_host: list[str]) -> Callable:
         """jax.jit, or where `cache_dir` is set and MJX runs its JAX implementation, a jit whose traced
@@ -324,6 +326,63 @@ class MjxSimulator(Simulator):
         (data, obs, broken, _, diverged, _), (states, acts, rewards, valid) = jax.lax.scan(body, init, actions)
         states = jnp.concatenate([init[-1][:, None], states.transpose(1, 0, 2)], 1)
         return (data, obs, broken, states, acts.transpose(1, 0, 2), rewards.T, valid.T, diverged)
+
+
+    # a closed loop with resets: a JAX policy inside the compiled rollout (PPO's collection) -----------------
+    @property
+    def closes_loops(self) -> bool:
+        """Whether `closed_loop` can run: every reset is computed on the device (no constant from the host's
+        set_const, which a compiled loop cannot call)."""
+        return self._setconst is None
+
+    def closed_loop(self, policy_fn: Callable, policy_args: Any, noise: torch.Tensor, reset_params: torch.Tensor,
+                    reset_states: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        """T control steps of every slot in one compiled `lax.scan`, actions from `policy_fn(policy_args, obs,
+        noise_t) -> (actions [N, A], extras {name: [N, ...]})` evaluated inside it, and each slot that ends an
+        episode reset at once to its row of that step's draws (reset_params [T, N, D], reset_states {field:
+        [T, N, ...]}): the step-by-step `step` with a reset after it, as rl/env.py's environment does.
+
+        Returns [T, N, ...] tensors on the device: observation (before the step), action (as the policy gave
+        it; the simulator clamps), the extras, and the step's next_observation (before any reset), reward,
+        terminated (diverged slots included) and truncated (episode length reached, not terminated)."""
+        if not self.closes_loops:
+            raise ValueError(f"{self.task.name}: constants computed on the host at every reset; no closed loop on MJX")
+        run = self._closed_loops.get(policy_fn)
+        if run is None:
+            run = self._closed_loops[policy_fn] = self.jax.jit(functools.partial(self._loop, policy_fn))
+        params = self._put(reset_params.numpy(), np.float32) if self.randomize else None
+        states = {k: self._put(v, getattr(self.data, k).dtype) for k, v in reset_states.items()}
+        elapsed = self._put(self.elapsed.numpy(), np.int32)
+        (self.leaves, self.data, self.obs, self.broken, elapsed), out = run(
+            self.leaves, self.data, self.obs, self.broken, elapsed, policy_args,
+            self.jnp.from_dlpack(noise.detach().float().contiguous()), params, states)
+        self.elapsed = to_torch(elapsed).cpu().long()
+        self.diverged = to_torch(self.broken).cpu().clone()
+        return {k: to_torch(v) for k, v in out.items()}
+
+    def _loop(self, policy_fn, leaves, data, obs, broken, elapsed, policy_args, noise, params, states):
+        jax, jnp = self.jax, self.jnp
+        limit = self.task.cfg.episode_length
+
+        def body(carry, xs):
+            leaves, data, obs, broken, elapsed = carry
+            noise_t, params_t, states_t = xs
+            actions, extras = policy_fn(policy_args, obs, noise_t)
+            data, next_obs, held, reward, terminated, _ = self._control_step(
+                leaves, data, obs, broken, jnp.clip(actions, -1.0, 1.0))
+            elapsed = elapsed + 1
+            terminated = terminated | held  # Simulator.step's bookkeeping, then the environment's
+            truncated = (elapsed >= limit) & ~terminated
+            done = terminated | truncated
+            # the reset's constants cost about a physics step: computed only where some slot ends its episode
+            leaves, data, obs, broken = jax.lax.cond(
+                done.any(), lambda a: self._reset_all(*a, done, params_t, states_t),
+                lambda a: a[:1] + a[2:], (leaves, {}, data, next_obs, held))
+            out = {"observation": carry[2], "action": actions, "next_observation": next_obs,
+                   "reward": jnp.where(held, 0.0, reward), "terminated": terminated, "truncated": truncated} | extras
+            return (leaves, data, obs, broken, jnp.where(done, 0, elapsed)), out
+
+        return jax.lax.scan(body, (leaves, data, obs, broken, elapsed), (noise, params, states))
 
 
 def _where(jnp: Any, mask: Any, a: Any, b: Any) -> Any:

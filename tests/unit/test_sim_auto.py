@@ -1,10 +1,13 @@
 """sim=auto's choice per task: MJX on a GPU, native MuJoCo where the task's tuning lists the MJX implementation
-found there in `native_faster_on` (measured faster). No MJX is built: MjxSimulator is a stand-in recording its
-arguments."""
+found there in `native_faster_on` (measured faster), and benchmarks/auto_choice.py's table from the same
+decision. No MJX is built: MjxSimulator is a stand-in recording its arguments."""
 
 from __future__ import annotations
 
+import json
 import logging
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -15,6 +18,9 @@ from bayessim_exp.sim import mjx as sim_mjx
 from bayessim_exp.sim import mjx_impl
 from bayessim_exp.sim.mjx_tuning import tuned_model
 from bayessim_exp.sim.native import NativeSimulator
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import auto_choice  # noqa: E402  benchmarks/auto_choice.py
 
 NATIVE_ON_JAX = ["task=Pendulum", "++sim.tuning.native_faster_on=[jax]", "sim.native_below=4"]
 
@@ -94,3 +100,31 @@ def test_humanoid_carries_mjx_contact_caps_in_its_tuning(compose):
     model = tuned_model(registry.build("task", compose(["task=Humanoid"]).task), tuning)
     assert {model.numeric(n).data[0] for n in ("max_geom_pairs", "max_contact_points")} == {8.0}
 
+
+ROWS = [{"task": "Humanoid", "backend": "native", "impl": "-", "envs": 4096, "env_steps_per_s": 80_000.0},
+        {"task": "Humanoid", "backend": "mjx", "impl": "jax", "envs": 4096, "env_steps_per_s": 200_000.0},
+        {"task": "ShadowHand", "backend": "native", "impl": "-", "envs": 4096, "env_steps_per_s": 50_000.0},
+        {"task": "ShadowHand", "backend": "mjx", "impl": "jax", "envs": 4096, "env_steps_per_s": 30_000.0},
+        {"task": "Ant", "error": "RuntimeError: out of memory"}]
+
+
+def test_the_auto_table_shows_the_factorys_choice_and_whether_the_tuning_is_right():
+    listed = {"Humanoid": {}, "ShadowHand": {"native_faster_on": ["jax"]}}
+    lines = {line[0]: line for line in auto_choice.table(ROWS, listed.get)}
+    assert lines["Humanoid"][5:] == ("MJX (jax)", "yes", "right")
+    assert lines["ShadowHand"][3:] == ("50,000", "30,000", "native", "yes", "right")
+    assert "FAILED" in lines["Ant"][-1]
+    wrong = {line[0]: line for line in auto_choice.table(ROWS, {"Humanoid": {"native_faster_on": ["jax"]},
+                                                                  "ShadowHand": {}}.get)}
+    assert wrong["Humanoid"][5:] == ("native", "yes", "drop jax from native_faster_on")
+    assert wrong["ShadowHand"][5:] == ("MJX (jax)", "no", "add jax to native_faster_on")
+
+
+def test_the_auto_table_script_reads_sim_throughputs_json_on_a_cpu(tmp_path, capsys):
+    path = tmp_path / "auto_table.json"
+    path.write_text(json.dumps({"device": "cuda:0", "impl": "jax", "overrides": [], "rows": ROWS}))
+    auto_choice.main([str(path)])
+    out = capsys.readouterr().out.splitlines()
+    assert out[1].startswith("| task | implementation |") and len(out) == 6
+    # ShadowHand's tuning lists jax (conf/mjx_tuning): the measured rows agree
+    assert "| ShadowHand | jax | 4,096 | 50,000 | 30,000 | native | yes | right |" in out

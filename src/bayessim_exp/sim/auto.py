@@ -1,6 +1,6 @@
 """sim=auto: MJX when JAX sees a GPU, native MuJoCo on CPU threads otherwise, and native MuJoCo on a GPU
 machine too for a task whose tuning lists the MJX implementation found there in `native_faster_on` (native
-measured faster: docs/benchmarks.md)."""
+measured faster: docs/benchmarks.md; benchmarks/auto_choice.py prints auto_choice's answers beside the rates)."""
 
 from __future__ import annotations
 

@@ -19,7 +19,8 @@ takes the task's tuning's `impl`), shown in the impl column.
 "randomization overhead" = 1 - mjx / mjx-fixed at the same size (sizes in --baseline-envs). Each figure is the median of
 `--reps` timed calls after a first call (compilation, or a persistent-cache load, included, reported
 as `first s`). `--compile-only` makes the first calls alone, to fill JAX's persistent cache
-(`--cache-dir`) from several processes at once before a timed run.
+(`--cache-dir`) from several processes at once before a timed run. benchmarks/auto_choice.py reads the
+`--json` file: what sim=auto picks beside the native and mjx rows.
 """
 
 from __future__ import annotations
@@ -174,7 +175,7 @@ def main():
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"device": str(jax.devices()[0]), "torch": torch.__version__, "jax": jax.__version__,
-                       "rows": rows}, f, indent=1)
+                       "impl": args.impl, "overrides": args.overrides, "rows": rows}, f, indent=1)
     if args.compile_only:
         return
     print(f"\ndevice {jax.devices()[0]}, sim.impl={args.impl}; control steps/s, median of {args.reps} rollouts after a first call")

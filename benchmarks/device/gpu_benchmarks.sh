@@ -15,6 +15,9 @@
 #   throughput   python benchmarks/sim_throughput.py, Pendulum and Cartpole at 131,072 environments
 #   throughput16k  the same for Ant, BallBalance, Ingenuity and Quadcopter at 16,384
 #   humanoid     python -m bayessim_exp experiment=gpu_humanoid device=cuda, twice (cold, then warm)
+#   auto_table   sim=auto against native MuJoCo (issue 29): benchmarks/sim_throughput.py for Humanoid, Ant and
+#                ShadowHand on MJX's JAX implementation (the gpu extra) and native on all CPU threads, 4,096
+#                environments x 50 steps; then benchmarks/auto_choice.py's table ($OUT/auto_table.json)
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
 #   calibration  the known-truth calibration study: sweeps/calibration.yaml (seed=range($SEEDS), default 100) on
 #                each task of $CAL_TASKS (default Pendulum) in turn, with device=cuda and $CALIBRATION_ARGS, $JOBS
@@ -149,6 +152,15 @@ step_throughput16k() {
         --reps 2 --cache-dir /tmp/jax_cache --json "$OUT/throughput_16384.json"
 }
 
+step_auto_table() {
+    # 4,096 environments x 50 control steps: a default run's collect chunk and horizon (conf/config.yaml), the
+    # batch its collect simulates on the GPU; one size and no mjx-fixed row, so each task's MJX compiles once
+    "$PY" benchmarks/sim_throughput.py --tasks Humanoid,Ant,ShadowHand --impl jax --rows native,mjx --envs 4096 \
+        --native-envs 4096 --horizon 50 --native-horizon 50 --reps 2 --cache-dir /tmp/jax_cache \
+        --json "$OUT/auto_table.json" || return 1
+    "$PY" benchmarks/auto_choice.py "$OUT/auto_table.json"
+}
+
 step_humanoid() {
     "$PY" -m bayessim_exp experiment=gpu_humanoid device=cuda logging.progress=false \
         hydra.run.dir=/tmp/humanoid_cold || return 1
@@ -242,7 +254,7 @@ failed=()
 for step in "$@"; do
     case $step in
         stash-warp) ;;
-        tests|model_fit|default_run|throughput|throughput16k|humanoid|calibration|round_coverage|foreign|results)
+        tests|model_fit|default_run|throughput|throughput16k|humanoid|auto_table|calibration|round_coverage|foreign|results)
             run_step "$step" || failed+=("$step") ;;
         *) say "unknown step: $step"; failed+=("$step") ;;
     esac

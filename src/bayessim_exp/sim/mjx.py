@@ -39,7 +39,7 @@ from ..tasks.params import ParamSpec, model_field
 from .base import Policy, Simulator, broke_down
 from .mjx_impl import IMPLS, implementation, resolve_impl
 from .mjx_setup import import_mjx, jax_setup
-from .mjx_tuning import check_tuning
+from .mjx_tuning import check_tuning, native_measured_faster
 from .native import NativeConfig, NativeSimulator
 from .trace_cache import ExportedJit, code_fingerprint, program_key
 from .trajectories import Trajectories
@@ -404,6 +404,10 @@ def mjx_backend(cfg: MjxConfig):
         if (task.name, impl.name) not in _LOGGED:
             _LOGGED.add((task.name, impl.name))
             log.info("sim=mjx %s: MJX implementation %s (sim.impl=%s)", task.name, impl.name, cfg.impl)
+            if native_measured_faster(impl.name, cfg.tuning):  # asked for MJX: it simulates, but slower
+                log.warning("sim=mjx %s: native MuJoCo on this machine's CPUs measured faster than MJX's %s "
+                            "implementation for this task (sim.tuning.native_faster_on; table in "
+                            "docs/benchmarks.md); sim=auto would simulate natively", task.name, impl.name)
         if num_envs < cfg.native_below:
             return NativeSimulator(task, num_envs, native, model=impl.model(task))
         return MjxSimulator(task, num_envs, cfg)

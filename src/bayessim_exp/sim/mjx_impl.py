@@ -14,9 +14,9 @@ import mujoco
 from ..errors import ConfigError
 from ..tasks.base import Task
 from .mjx_setup import import_mjx, leave_out_warp
-from .mjx_tuning import tuned_model, warp_buffer
+from .mjx_tuning import MJX_IMPLS, tuned_model, warp_buffer
 
-IMPLS = ("auto", "jax", "warp")
+IMPLS = ("auto", *MJX_IMPLS)
 
 
 def resolve_impl(impl: str, tuning: Mapping[str, Any] | None = None) -> str:

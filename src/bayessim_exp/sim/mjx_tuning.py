@@ -5,14 +5,16 @@ as written.
 The keys, the model's first (MODEL_TUNING): solver iterations and line-search iterations (MjOption), MJX's
 contact caps (custom numerics it reads: contacts per geom pair, geom pairs per collision function), the
 smallest geom condim (MJX's JAX implementation has no frictionless contacts with elliptic cones); then
-MuJoCo Warp's buffers per environment (contacts, constraint rows; what overflows them is dropped), and
-`impl: jax` where MJX's JAX implementation is the faster one for the task (sim.impl=auto takes it).
+MuJoCo Warp's buffers per environment (contacts, constraint rows; what overflows them is dropped),
+`impl: jax` where MJX's JAX implementation is the faster one for the task (sim.impl=auto takes it), and
+`native_faster_on`: the implementations on which native MuJoCo on the machine's CPUs measured faster for the
+task (docs/benchmarks.md; sim=auto simulates natively there, sim/auto.py).
 """
 
 from __future__ import annotations
 
 import weakref
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import mujoco
@@ -23,7 +25,8 @@ from ..tasks.base import Task
 MODEL_TUNING = ("iterations", "ls_iterations", "max_contact_points", "max_geom_pairs", "min_condim")
 # MuJoCo Warp's own default sizes for models without height fields or flexes (mujoco_warp io.py)
 WARP_BUFFERS = {"contacts_per_env": 48, "constraints_per_env": 64}
-TUNING_KEYS = (*MODEL_TUNING, *WARP_BUFFERS, "impl")
+MJX_IMPLS = ("jax", "warp")  # MJX's implementations (mjx_impl.py), as sim.impl and the tuning name them
+TUNING_KEYS = (*MODEL_TUNING, *WARP_BUFFERS, "impl", "native_faster_on")
 # compiled tuned models per task and tuning: every simulator size and the small native batches share one
 _TUNED: weakref.WeakKeyDictionary[Task, dict[tuple, mujoco.MjModel]] = weakref.WeakKeyDictionary()
 
@@ -38,6 +41,15 @@ def check_tuning(tuning: Mapping[str, Any]) -> None:
     small = [k for k in WARP_BUFFERS if k in tuning and int(tuning[k]) < 1]
     if small:
         raise ConfigError(f"sim.tuning: {', '.join(small)} must be >= 1")
+    slower = tuning.get("native_faster_on", [])
+    if isinstance(slower, str) or not isinstance(slower, Sequence) or any(v not in MJX_IMPLS for v in slower):
+        raise ConfigError(f"sim.tuning.native_faster_on={slower!r}: a list of MJX implementations from "
+                          f"{', '.join(MJX_IMPLS)} (e.g. [jax])")
+
+
+def native_measured_faster(impl: str, tuning: Mapping[str, Any]) -> bool:
+    """Native MuJoCo on the machine's CPUs measured faster for the task than MJX's implementation `impl`."""
+    return impl in tuning.get("native_faster_on", [])
 
 
 def warp_buffer(tuning: Mapping[str, Any], key: str) -> int:

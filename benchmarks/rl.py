@@ -77,8 +77,8 @@ def throughput(task: str, steps: int, stepwise_steps: int, overrides: list[str])
     sim.rollout(nominal, RandomPolicy(comp.task.action_dim, 0), horizon)
     row = {"task": task, "envs": cfg.num_envs, "rollout_steps": cfg.rollout_steps, "epochs": cfg.epochs,
            "minibatch": cfg.minibatch_size, "simulator": cfg.num_envs * horizon / (time.perf_counter() - t0)}
-    for path, n in (("compiled", steps), ("stepwise", stepwise_steps)):
-        if path == "compiled" and not compiled_available(comp, rl):
+    for path, n in zip(PATHS, (steps, stepwise_steps)):
+        if n == 0 or path == "compiled" and not compiled_available(comp, rl):
             continue
         first = train_once(comp, rl, path)
         timed = train_once(comp, rl, path, n)
@@ -112,15 +112,13 @@ def print_tables(rows: list[dict], solve: dict, overrides: list[str]) -> None:
           "| PPO, stepwise Collector | compilation s (compiled / stepwise) | share in updates (compiled / stepwise) |")
     print("|---|---|---:|---:|---:|---:|---:|")
     for r in rows:
-        c, s = r.get("compiled"), r["stepwise"]
-
-        def rate(x):
-            return "-" if x is None else f"{x['steps_per_s']:,.0f} ({x['steps_per_s'] / r['simulator']:.2f}x)"
-
-        compile_s = f"{'-' if c is None else format(c['compile_s'], '.1f')} / {s['compile_s']:.1f}"
-        share = f"{'-' if c is None else format(c['update_share'], '.0%')} / {s['update_share']:.0%}"
+        paths = [r.get(path) for path in PATHS]
+        rates = ["-" if x is None else f"{x['steps_per_s']:,.0f} ({x['steps_per_s'] / r['simulator']:.2f}x)"
+                 for x in paths]
+        compile_s, share = (" / ".join("-" if x is None else format(x[key], spec) for x in paths)
+                            for key, spec in (("compile_s", ".1f"), ("update_share", ".0%")))
         print(f"| {r['task']} | {r['envs']} x {r['rollout_steps']}, {r['epochs']} x {r['minibatch']} "
-              f"| {r['simulator']:,.0f} | {rate(c)} | {rate(s)} | {compile_s} | {share} |")
+              f"| {r['simulator']:,.0f} | {rates[0]} | {rates[1]} | {compile_s} | {share} |")
     if solve["seconds"] is None:
         print(f"Cartpole ({solve['path']}): 95 % of the maximum return ({solve['target']:.0f}) not reached in "
               f"{solve['budget_steps']:,} steps (best batch mean {solve['best']:.1f})")
@@ -134,7 +132,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tasks", nargs="+", default=["Cartpole", "Ant"])
     ap.add_argument("--steps", type=int, default=32768, help="timed PPO steps, compiled path (and the simulator's)")
-    ap.add_argument("--stepwise-steps", type=int, default=None, help="timed PPO steps, stepwise path (default --steps)")
+    ap.add_argument("--stepwise-steps", type=int, default=None, help="timed PPO steps, stepwise path (default --steps; 0: no stepwise row)")
     ap.add_argument("--solve-steps", type=int, default=80000, help="Cartpole's budget to reach 95 %% of the maximum")
     ap.add_argument("--overrides", nargs="*", default=[], help="Hydra overrides, e.g. sim=mjx device=cuda")
     ap.add_argument("--json", default=None)

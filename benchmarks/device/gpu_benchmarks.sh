@@ -18,6 +18,11 @@
 #   auto_table   sim=auto against native MuJoCo (issue 29): benchmarks/sim_throughput.py for Humanoid, Ant and
 #                ShadowHand on MJX's JAX implementation (the gpu extra) and native on all CPU threads, 4,096
 #                environments x 50 steps; then benchmarks/auto_choice.py's table ($OUT/auto_table.json)
+#   rl_gpu       benchmarks/rl.py on the GPU (issue 29): Cartpole and Ant, PPO with the compiled collection and
+#                with torchrl's stepwise Collector, 8,192 environments x 16 steps, 5 epochs of minibatches of
+#                32,768, once per MJX implementation in $RL_IMPLS (default "jax warp"; warp only where it came up);
+#                Cartpole's run to 95 % of the maximum return with the same settings ($OUT/rl_gpu_<impl>.json)
+#   rl_cpu       benchmarks/rl.py on the machine's CPUs: native MuJoCo, the tasks' own PPO settings ($OUT/rl_cpu.json)
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
 #   calibration  the known-truth calibration study: sweeps/calibration.yaml (seed=range($SEEDS), default 100) on
 #                each task of $CAL_TASKS (default Pendulum) in turn, with device=cuda and $CALIBRATION_ARGS, $JOBS
@@ -115,7 +120,7 @@ step_tests() {
     local xml=/tmp/gpu_tests.xml
     "$PY" -m pytest -q -rs -p no:cacheprovider --durations=15 --junitxml="$xml" \
         tests/unit/test_mjx.py tests/unit/test_mjx_constants.py tests/unit/test_mjx_tuning.py \
-        tests/unit/test_trace_cache.py tests/unit/test_models.py tests/unit/test_adam.py \
+        tests/unit/test_trace_cache.py tests/unit/test_compiled_collection.py tests/unit/test_models.py tests/unit/test_adam.py \
         tests/unit/test_mixture_nll.py tests/unit/test_mdnn.py || return 1
     # a selection that deselects or skips every MJX test passes too: check that the MJX-against-native ones ran
     "$PY" - "$xml" <<'EOF'
@@ -159,6 +164,22 @@ step_auto_table() {
         --native-envs 4096 --horizon 50 --native-horizon 50 --reps 2 --cache-dir /tmp/jax_cache \
         --json "$OUT/auto_table.json" || return 1
     "$PY" benchmarks/auto_choice.py "$OUT/auto_table.json"
+}
+
+step_rl_gpu() {
+    local rc=0 impl
+    for impl in ${RL_IMPLS:-jax warp}; do
+        if [ "$impl" = warp ] && ! "$PY" -c "import warp" 2>/dev/null; then echo "warp-lang not here: no warp rows"; continue; fi
+        echo "== sim.impl=$impl"
+        "$PY" benchmarks/rl.py --tasks Cartpole Ant --steps 2097152 --stepwise-steps 262144 --solve-steps 8388608 \
+            --json "$OUT/rl_gpu_$impl.json" --overrides sim=mjx device=cuda "sim.impl=$impl" sim.cache_dir=/tmp/jax_cache \
+            rl.train.num_envs=8192 rl.train.rollout_steps=16 rl.train.minibatch_size=32768 rl.train.epochs=5 || rc=1
+    done
+    return $rc
+}
+
+step_rl_cpu() {
+    OMP_NUM_THREADS=1 "$PY" benchmarks/rl.py --tasks Cartpole Ant --json "$OUT/rl_cpu.json" --overrides sim=native
 }
 
 step_humanoid() {
@@ -254,7 +275,7 @@ failed=()
 for step in "$@"; do
     case $step in
         stash-warp) ;;
-        tests|model_fit|default_run|throughput|throughput16k|humanoid|auto_table|calibration|round_coverage|foreign|results)
+        tests|model_fit|default_run|throughput|throughput16k|humanoid|auto_table|rl_gpu|rl_cpu|calibration|round_coverage|foreign|results)
             run_step "$step" || failed+=("$step") ;;
         *) say "unknown step: $step"; failed+=("$step") ;;
     esac

@@ -16,6 +16,7 @@ import dataclasses
 
 import pytest
 import torch
+from tensordict import TensorDict
 from tensordict.nn import TensorDictModuleBase
 
 from bayessim_exp import registry
@@ -76,39 +77,69 @@ def setup():
     return task, prior, sim, train
 
 
-def test_compiled_batches_equal_the_collectors(setup):
+def collect_both_ways(sim, agent, sampler, steps: int, batches: int) -> tuple[list, list]:
+    """The compiled collector's batches, and the Collector's over SimulatorEnv fed the same noise and seed."""
     from torchrl.collectors import Collector
     from torchrl.envs import TransformedEnv
     from torchrl.envs.transforms import RewardSum
 
-    task, prior, sim, train = setup
-    torch.manual_seed(0)
-    agent = make_agent(train, task.obs_dim, task.action_dim, "cpu")
-    with torch.no_grad():  # a trained-looking normaliser, so that it is exercised
-        agent.norm.mean.copy_(torch.tensor([0.5, -0.2, 1.0]))
-        agent.norm.var.copy_(torch.tensor([0.3, 0.6, 4.0]))
+    total = sim.num_envs * steps * batches
     noise = RecordedNoise(1)
-    env = SimulatorEnv(sim, distribution_sampler(prior), seed=7, draw_steps=STEPS)
-    compiled = list(CompiledCollector(env, agent, STEPS, train.total_steps, seed=7, noise=noise))
-
-    env = SimulatorEnv(sim, distribution_sampler(prior), seed=7, draw_steps=STEPS)
+    env = SimulatorEnv(sim, sampler, seed=7, draw_steps=steps)
+    compiled = list(CompiledCollector(env, agent, steps, total, seed=7, noise=noise))
+    env = SimulatorEnv(sim, sampler, seed=7, draw_steps=steps)
     env.set_seed(7)
     policy = NoiseFedActor(agent, torch.cat(noise.drawn))
-    collector = Collector(TransformedEnv(env, RewardSum()), policy, frames_per_batch=ENVS * STEPS,
-                          total_frames=train.total_steps, auto_register_policy_transforms=False)
+    collector = Collector(TransformedEnv(env, RewardSum()), policy, frames_per_batch=sim.num_envs * steps,
+                          total_frames=total, auto_register_policy_transforms=False)
     policy.step = 0  # the Collector may call its policy once while it is built
     stepwise = list(collector)
-    assert len(compiled) == len(stepwise) == BATCHES
+    assert len(compiled) == len(stepwise) == batches
     for ours, theirs in zip(compiled, stepwise):
         for key in ("observation", "action", "action_log_prob", ("next", "observation"), ("next", "reward"),
                     ("next", "episode_reward")):
             torch.testing.assert_close(ours[key], theirs[key], atol=TOL, rtol=0, msg=f"{key}")
         for key in (("next", "done"), ("next", "terminated"), ("next", "truncated")):
             assert torch.equal(ours[key], theirs[key]), key
+    return compiled, stepwise
+
+
+def test_compiled_batches_equal_the_collectors(setup):
+    task, prior, sim, train = setup
+    torch.manual_seed(0)
+    agent = make_agent(train, task.obs_dim, task.action_dim, "cpu")
+    with torch.no_grad():  # a trained-looking normaliser, so that it is exercised
+        agent.norm.mean.copy_(torch.tensor([0.5, -0.2, 1.0]))
+        agent.norm.var.copy_(torch.tensor([0.3, 0.6, 4.0]))
+    compiled, _ = collect_both_ways(sim, agent, distribution_sampler(prior), STEPS, BATCHES)
     # episodes of 5 steps in batches of 8: both batches hold resets with new parameters drawn from the prior
     assert compiled[0]["next", "truncated"].sum() == ENVS and compiled[1]["next", "truncated"].sum() == 2 * ENVS
+    assert not compiled[0]["next", "terminated"].any()
     first, after_reset = compiled[0]["observation"][:, 0], compiled[0]["observation"][:, 5]
     assert not torch.allclose(first, after_reset)
+
+
+def test_a_diverging_slot_ends_its_episode_alike():
+    from test_native import spring_task  # noqa: PLC0415  (tests/unit is on sys.path under pytest)
+
+    task = spring_task()  # k = 1e6 blows up; episodes of 200 steps: only a breakdown ends one here
+    sim = MjxSimulator(task, 4, MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=0, impl="jax",
+                                          tuning={}))
+    rows = torch.tensor([[10.0], [1.0e6], [100.0], [1.0e6]], dtype=torch.float64)
+    torch.manual_seed(0)
+    agent = make_agent(PPOConfig(**{**_ppo_defaults(), "hidden": [8]}), task.obs_dim, task.action_dim, "cpu")
+    compiled, _ = collect_both_ways(sim, agent, lambda n, generator: rows.repeat(n // 4, 1), 50, 2)
+    terminated = torch.cat([b["next", "terminated"][..., 0] for b in compiled], 1)
+    assert terminated[[0, 2]].sum() == 0 and (terminated[[1, 3]].sum(1) >= 1).all()
+    ended = terminated.nonzero()
+    rewards = torch.cat([b["next", "reward"][..., 0] for b in compiled], 1)
+    assert all(rewards[i, t] == 0.0 for i, t in ended.tolist())  # no reward from a broken-down step
+
+
+def _ppo_defaults() -> dict:
+    from bayessim_exp import api
+
+    return dict(api.compose(["rl=ppo"]).rl.train) | {"num_envs": 4, "rollout_steps": 50, "total_steps": 400}
 
 
 def test_the_jax_actor_is_the_torch_actor(setup):
@@ -118,8 +149,9 @@ def test_the_jax_actor_is_the_torch_actor(setup):
     torch.manual_seed(3)
     agent = make_agent(dataclasses.replace(train, hidden=[16, 8, 4]), task.obs_dim, task.action_dim, "cpu")
     obs, eps = torch.randn(5, task.obs_dim) * 3, torch.randn(5, task.action_dim)
-    action, extras = gaussian_actor(actor_arrays(agent), jnp.asarray(obs.numpy()), jnp.asarray(eps.numpy()))
-    td = agent.actor.module[0](__import__("tensordict").TensorDict({"observation": obs}, [5]))
+    action, extras = gaussian_actor(actor_arrays(agent, torch.device("cpu")), jnp.asarray(obs.numpy()),
+                                    jnp.asarray(eps.numpy()))
+    td = agent.actor.module[0](TensorDict({"observation": obs}, [5]))
     expected = td["loc"] + td["scale"] * eps
     torch.testing.assert_close(torch.from_dlpack(action), expected, atol=1e-5, rtol=0)
     log_prob = torch.distributions.Normal(td["loc"], td["scale"]).log_prob(expected).sum(-1)

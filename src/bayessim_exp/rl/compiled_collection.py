@@ -37,14 +37,14 @@ def can_compile(env: SimulatorEnv) -> bool:
     return getattr(env.sim, "closes_loops", False)
 
 
-def actor_arrays(agent: Agent) -> tuple:
-    """The actor's weights as JAX arrays (copies: the optimiser updates the torch ones in place while a
-    dispatched JAX loop may still read them): normaliser mean, std and clip, the MLP's (weight, bias)
-    pairs in order, and the state-independent scale."""
+def actor_arrays(agent: Agent, device: torch.device) -> tuple:
+    """The actor's weights as JAX arrays on the simulator's `device` (copies: the optimiser updates the torch
+    ones in place while a dispatched JAX loop may still read them): normaliser mean, std and clip, the MLP's
+    (weight, bias) pairs in order, and the state-independent scale."""
     import jax.numpy as jnp
 
     def put(t: torch.Tensor):
-        return jnp.from_dlpack(t.detach().float().contiguous().clone())
+        return jnp.from_dlpack(t.detach().to(device, torch.float32).contiguous().clone())
 
     policy_net = agent.actor.module[0].module  # ProbabilisticActor -> TensorDictModule -> norm, MLP, scale
     norm, mlp, _ = policy_net
@@ -89,8 +89,8 @@ class CompiledCollector:
         for _ in range(self.total // (sim.num_envs * steps)):
             params, states = self.env.draws.take(steps)
             noise = self.noise((steps, sim.num_envs, sim.task.action_dim), sim.device)
-            out = sim.closed_loop(gaussian_actor, actor_arrays(self.agent), noise, params, states)
-            yield self._batch(out)
+            out = sim.closed_loop(gaussian_actor, actor_arrays(self.agent, sim.device), noise, params, states)
+            yield self._batch(out).to(self.agent.norm.mean.device)  # where the update runs
 
     def _batch(self, out: dict[str, Any]) -> TensorDict:
         """[T, N] arrays -> the Collector's [N, T] TensorDict, with RewardSum's running episode returns."""

@@ -57,7 +57,6 @@ class PPOTrainer:
 
     def train(self, env: SimulatorEnv, seed: int, on_batch: Callable[[int, dict], None] | None = None) -> dict:
         """PPO for cfg.total_steps steps of `env`; returns the training curve (steps, mean episode return)."""
-        cfg = self.cfg
         collector = self._collector(env, seed)
         curve: dict[str, list[float]] = {"steps": [], "episode_return": [], "seconds": [], "update_seconds": []}
         t0 = time.perf_counter()

@@ -107,10 +107,10 @@ def collect_both_ways(sim, agent, sampler, steps: int, batches: int) -> tuple[li
 def test_compiled_batches_equal_the_collectors(setup):
     task, prior, sim, train = setup
     torch.manual_seed(0)
-    agent = make_agent(train, task.obs_dim, task.action_dim, "cpu")
+    agent = make_agent(train, task.obs_dim, task.action_dim, sim.device)  # a GPU on the device machine
     with torch.no_grad():  # a trained-looking normaliser, so that it is exercised
-        agent.norm.mean.copy_(torch.tensor([0.5, -0.2, 1.0]))
-        agent.norm.var.copy_(torch.tensor([0.3, 0.6, 4.0]))
+        agent.norm.mean.copy_(torch.tensor([0.5, -0.2, 1.0], device=sim.device))
+        agent.norm.var.copy_(torch.tensor([0.3, 0.6, 4.0], device=sim.device))
     compiled, _ = collect_both_ways(sim, agent, distribution_sampler(prior), STEPS, BATCHES)
     # episodes of 5 steps in batches of 8: both batches hold resets with new parameters drawn from the prior
     assert compiled[0]["next", "truncated"].sum() == ENVS and compiled[1]["next", "truncated"].sum() == 2 * ENVS
@@ -127,7 +127,7 @@ def test_a_diverging_slot_ends_its_episode_alike():
                                           tuning={}))
     rows = torch.tensor([[10.0], [1.0e6], [100.0], [1.0e6]], dtype=torch.float64)
     torch.manual_seed(0)
-    agent = make_agent(PPOConfig(**{**_ppo_defaults(), "hidden": [8]}), task.obs_dim, task.action_dim, "cpu")
+    agent = make_agent(PPOConfig(**{**_ppo_defaults(), "hidden": [8]}), task.obs_dim, task.action_dim, sim.device)
     compiled, _ = collect_both_ways(sim, agent, lambda n, generator: rows.repeat(n // 4, 1), 50, 2)
     terminated = torch.cat([b["next", "terminated"][..., 0] for b in compiled], 1)
     assert terminated[[0, 2]].sum() == 0 and (terminated[[1, 3]].sum(1) >= 1).all()

@@ -101,8 +101,8 @@ class PPOTrainer:
         # only what the clipped objective reads: each minibatch gathers these rows (GAE wrote the last two)
         flat = batch.select("observation", "action", "action_log_prob", "advantage", "value_target").reshape(-1)
         generator = torch.Generator().manual_seed(seed)
-        # summed on the device: a float() per minibatch would wait for the GPU three times per update
-        sums = {k: torch.zeros((), device=flat.device) for k in ("loss_objective", "loss_critic", "loss_entropy")}
+        # summed where the losses are: a float() per minibatch would wait for the GPU three times per update
+        sums = dict.fromkeys(("loss_objective", "loss_critic", "loss_entropy"), 0.0)
         updates = 0
         for _ in range(cfg.epochs):
             order = torch.randperm(flat.numel(), generator=generator)

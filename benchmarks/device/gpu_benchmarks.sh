@@ -21,7 +21,7 @@
 #   rl_gpu       benchmarks/rl.py on the GPU (issue 29): Cartpole and Ant, PPO with the compiled collection and
 #                with torchrl's stepwise Collector, 8,192 environments x 16 steps, 5 epochs of minibatches of
 #                32,768, once per MJX implementation in $RL_IMPLS (default "jax warp"; warp only where it came up);
-#                Cartpole's run to 95 % of the maximum return with 4,096 x 16 and 10 epochs of 16,384, the
+#                Cartpole's run to 95 % of the maximum return with 2,048 x 32 and 5 epochs of 16,384, the
 #                fastest of the settings tried (docs/benchmarks.md) ($OUT/rl_gpu_<impl>.json)
 #   rl_cpu       benchmarks/rl.py on the machine's CPUs: native MuJoCo, the tasks' own PPO settings ($OUT/rl_cpu.json)
 #   stash-warp   only keeps the Warp parts carried in this call (.warp/*/) for a later call on the same machine
@@ -175,7 +175,7 @@ step_rl_gpu() {
         "$PY" benchmarks/rl.py --tasks Cartpole Ant --steps 2097152 --stepwise-steps 262144 --solve-steps 4194304 \
             --json "$OUT/rl_gpu_$impl.json" --overrides sim=mjx device=cuda "sim.impl=$impl" sim.cache_dir=/tmp/jax_cache \
             rl.train.num_envs=8192 rl.train.rollout_steps=16 rl.train.minibatch_size=32768 rl.train.epochs=5 \
-            --solve-overrides rl.train.num_envs=4096 rl.train.minibatch_size=16384 rl.train.epochs=10 || rc=1
+            --solve-overrides rl.train.num_envs=2048 rl.train.rollout_steps=32 rl.train.minibatch_size=16384 || rc=1
     done
     return $rc
 }

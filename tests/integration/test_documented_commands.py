@@ -97,7 +97,7 @@ def test_a_synopsis_is_read_as_its_arguments():
     assert documented_commands(path)[0][:4] == ["--tasks", "Pendulum,Humanoid", "--envs", "8192,32768"]
     assert "--impl" in documented_commands(path)[0] and documented_commands(path)[0][-1] == "auto"
     rl = documented_commands(REPO / "benchmarks" / "rl.py")
-    assert rl[0] == [] and rl[1][:2] == ["--steps", "262144"] and rl[1][-1] == "rl.train.total_steps=3000000"
+    assert rl[0] == [] and rl[1][:3] == ["--tasks", "Cartpole", "Ant"] and rl[1][-1] == "rl.train.epochs=5"
 
 
 @pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.stem}")
@@ -118,19 +118,20 @@ def rl_benchmark():
 
 
 def test_rl_benchmark_gpu_command_sizes_are_whole_batches():
-    """The docstring's GPU command, built here (nothing simulated): 4,096 environments x 16 steps a batch."""
+    """The docstring's GPU command, built here (nothing simulated): 8,192 environments x 16 steps a batch."""
     args = documented_commands(REPO / "benchmarks" / "rl.py")[1]
     overrides = args[args.index("--overrides") + 1:]
     rl = rl_benchmark()
-    assert rl.components("Cartpole", overrides, 262144)[1].train_cfg.total_steps == 262144  # 4 batches
-    assert rl.components("Cartpole", overrides)[1].train_cfg.total_steps == 46 * 4096 * 16  # 3,000,000 rounded up
+    assert rl.components("Cartpole", overrides, 262144)[1].train_cfg.total_steps == 262144  # 2 batches
+    assert rl.components("Cartpole", overrides, 3_000_000)[1].train_cfg.total_steps == 23 * 8192 * 16  # rounded up
 
 
 def test_rl_benchmark_runs_on_cpu_at_a_tiny_size():
-    proc = subprocess.run([sys.executable, "benchmarks/rl.py", "--tasks", "Cartpole", "--steps", "100", "--overrides",
-                           "rl.train.num_envs=4", "rl.train.rollout_steps=8", "rl.train.minibatch_size=16",
-                           "rl.train.epochs=1", "rl.train.total_steps=40"], cwd=REPO, env=ENV, capture_output=True,
+    proc = subprocess.run([sys.executable, "benchmarks/rl.py", "--tasks", "Cartpole", "--steps", "100", "--solve-steps",
+                           "40", "--overrides", "rl.train.num_envs=4", "rl.train.rollout_steps=8",
+                           "rl.train.minibatch_size=16", "rl.train.epochs=1"], cwd=REPO, env=ENV, capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert re.search(r"^\| Cartpole \| 4 \| 128 \|", proc.stdout, re.M), proc.stdout  # 100 steps: 4 batches of 32
-    assert re.search(r"^Cartpole: .* 64 steps", proc.stdout, re.M), proc.stdout  # a budget of 40: 2 batches
+    # native MuJoCo: no compiled row; the stepwise one over 100 steps rounded up to 4 batches of 32
+    assert re.search(r"^\| Cartpole \| 4 x 8, 1 x 16 \| [\d,]+ \| - \| [\d,]+ \(", proc.stdout, re.M), proc.stdout
+    assert re.search(r"^Cartpole \(stepwise.* 64 steps", proc.stdout, re.M), proc.stdout  # a budget of 40: 2 batches

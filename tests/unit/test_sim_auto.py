@@ -103,21 +103,21 @@ def test_humanoid_carries_mjx_contact_caps_in_its_tuning(compose):
 
 ROWS = [{"task": "Humanoid", "backend": "native", "impl": "-", "envs": 4096, "env_steps_per_s": 80_000.0},
         {"task": "Humanoid", "backend": "mjx", "impl": "jax", "envs": 4096, "env_steps_per_s": 200_000.0},
-        {"task": "ShadowHand", "backend": "native", "impl": "-", "envs": 4096, "env_steps_per_s": 50_000.0},
-        {"task": "ShadowHand", "backend": "mjx", "impl": "jax", "envs": 4096, "env_steps_per_s": 30_000.0},
-        {"task": "Ant", "error": "RuntimeError: out of memory"}]
+        {"task": "Ant", "backend": "native", "impl": "-", "envs": 4096, "env_steps_per_s": 50_000.0},
+        {"task": "Ant", "backend": "mjx", "impl": "jax", "envs": 4096, "env_steps_per_s": 30_000.0},
+        {"task": "ShadowHand", "error": "RuntimeError: out of memory"}]
 
 
 def test_the_auto_table_shows_the_factorys_choice_and_whether_the_tuning_is_right():
-    listed = {"Humanoid": {}, "ShadowHand": {"native_faster_on": ["jax"]}}
+    listed = {"Humanoid": {}, "Ant": {"native_faster_on": ["jax"]}}
     lines = {line[0]: line for line in auto_choice.table(ROWS, listed.get)}
     assert lines["Humanoid"][5:] == ("MJX (jax)", "yes", "right")
-    assert lines["ShadowHand"][3:] == ("50,000", "30,000", "native", "yes", "right")
-    assert "FAILED" in lines["Ant"][-1]
+    assert lines["Ant"][3:] == ("50,000", "30,000", "native", "yes", "right")
+    assert "FAILED" in lines["ShadowHand"][-1]
     wrong = {line[0]: line for line in auto_choice.table(ROWS, {"Humanoid": {"native_faster_on": ["jax"]},
-                                                                  "ShadowHand": {}}.get)}
+                                                                  "Ant": {}}.get)}
     assert wrong["Humanoid"][5:] == ("native", "yes", "drop jax from native_faster_on")
-    assert wrong["ShadowHand"][5:] == ("MJX (jax)", "no", "add jax to native_faster_on")
+    assert wrong["Ant"][5:] == ("MJX (jax)", "no", "add jax to native_faster_on")
 
 
 def test_the_auto_table_script_reads_sim_throughputs_json_on_a_cpu(tmp_path, capsys):
@@ -126,5 +126,5 @@ def test_the_auto_table_script_reads_sim_throughputs_json_on_a_cpu(tmp_path, cap
     auto_choice.main([str(path)])
     out = capsys.readouterr().out.splitlines()
     assert out[1].startswith("| task | implementation |") and len(out) == 6
-    # ShadowHand's tuning lists jax (conf/mjx_tuning): the measured rows agree
-    assert "| ShadowHand | jax | 4,096 | 50,000 | 30,000 | native | yes | right |" in out
+    # Ant's tuning lists jax (conf/mjx_tuning): these rows agree
+    assert "| Ant | jax | 4,096 | 50,000 | 30,000 | native | yes | right |" in out

@@ -35,7 +35,7 @@ from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
 
-from results_sections import ROOT, TEMPLATES, Context, Job, MethodsSection, RlSection, ScriptSection
+from results_sections import ROOT, TEMPLATES, Context, Job, MethodsSection, RlSection, RobotsSection, ScriptSection
 
 SECTIONS = [
     MethodsSection(),
@@ -44,6 +44,7 @@ SECTIONS = [
                   quick_args=("--section", "--quick", "--jobs", "2", "--sources", "ours", "--settings", "1",
                               "--sine", "0"), cost=600.0),
     RlSection(),
+    RobotsSection(),
 ]
 BLOCK = re.compile(r"<!-- section (\S+) -->\n(.*?)\n<!-- end \1 -->", re.S)
 

@@ -328,6 +328,85 @@ class RlSection:
         }
 
 
+class RobotsSection:
+    """BayesSim's headline on robots (scripts/rl_on_robots.py): per task, PPO on the round-1 and last-round
+    posteriors, on the uniform prior and on the nominal model, over surrogate real settings x seeds, one process
+    per (setting, seed); the per-task JSON and the figure go to ctx.figures."""
+
+    name = "rl_on_robots"
+    # per task: settings, seeds, and the script's further arguments (PPO's own task settings on one CPU thread)
+    tasks = {"Cartpole": ((0, 1, 2), (0, 1, 2, 3, 4), ["--overrides", *CPU_JOB, "--rl-overrides", *CPU_JOB])}
+    quick = ["--rounds", "2", "--episodes", "2", "--overrides", *CPU_JOB, "debug=smoke", "--rl-overrides", *CPU_JOB,
+             "debug=smoke"]
+
+    def _pairs(self, ctx: Context):
+        for task, (settings, seeds, _) in self.tasks.items():
+            for setting, seed in itertools.product(settings[:1], seeds[:1]) if ctx.quick else itertools.product(
+                    settings, seeds):
+                yield task, setting, seed
+
+    def _argv(self, ctx: Context, task: str, setting: int, seed: int) -> list[str]:
+        extra = self.quick if ctx.quick else self.tasks[task][2]
+        return [sys.executable, "scripts/rl_on_robots.py", "--task", task, "--settings", str(setting), "--seeds",
+                str(seed), *extra, "--out", str(ctx.work / f"{task}_{setting}_{seed}.json"),
+                "--run-dir", str(ctx.work / "runs")]
+
+    def jobs(self, ctx: Context) -> list[Job]:
+        return [Job(f"{self.name}/{task}_setting{setting}_seed{seed}", self._argv(ctx, task, setting, seed), 300)
+                for task, setting, seed in self._pairs(ctx)]
+
+    def render(self, ctx: Context, stamp: str) -> str:
+        from rl_on_robots import TRAINED_ON, plot
+
+        per_task: dict[str, dict] = {}
+        for task, setting, seed in self._pairs(ctx):
+            part = json.loads((ctx.work / f"{task}_{setting}_{seed}.json").read_text())
+            per_task.setdefault(task, {**part, "runs": []})["runs"] += part["runs"]
+        ctx.figures.mkdir(parents=True, exist_ok=True)
+        blocks = []
+        for task, results in per_task.items():
+            (ctx.figures / f"{self.name}_{task}.json").write_text(json.dumps(results, indent=1))
+            plot(results, ctx.figures / f"{self.name}_{task}.png")
+            blocks.append(self._task_block(ctx, task, results, TRAINED_ON))
+        return template(self.name).substitute(stamp=stamp, tasks="\n\n".join(blocks))
+
+    def _task_block(self, ctx: Context, task: str, results: dict, trained_on: tuple[str, ...]) -> str:
+        runs = results["runs"]
+        score = {n: [r[n]["return"]["mean"] for r in runs] for n in trained_on}
+        labels = {"posterior_round_1": "posterior after round 1", "posterior": f"posterior after round {results['rounds']}",
+                  "prior": "uniform prior", "nominal": "nominal (the MJCF's)"}
+        rows = [f"| {labels[n]} | {statistics.fmean(score[n]):.1f} | {_interval(score[n])} | "
+                f"{_paired(score[n], score['prior'])} | {_paired(score[n], score['nominal'])} |" for n in trained_on]
+        settings = sorted({r["setting"] for r in runs})
+        seeds = sorted({r["seed"] for r in runs})
+        by_setting = [f"setting {k} (" + ", ".join(f"{n} {v:.3g}" for n, v in next(
+            r for r in runs if r["setting"] == k)["real"].items()) + "): " + ", ".join(
+            f"{labels[n].split(' (')[0]} {statistics.fmean(r[n]['return']['mean'] for r in runs if r['setting'] == k):.1f}"
+            for n in trained_on) for k in settings]
+        ppo = runs[0]["ppo"]
+        verdict = _verdict_text(score, results["rounds"])
+        command = python_command(self._argv(ctx, task, settings[0], seeds[0]))
+        command = command.replace(f"--settings {settings[0]}", "--settings K").replace(f"--seeds {seeds[0]}", "--seeds S")
+        return "\n".join([
+            f"### {task}", "",
+            f"{len(settings)} surrogate real settings x {len(seeds)} seeds = {len(runs)} pairs; {results['rounds']} "
+            f"BayesSim rounds per pair; PPO {ppo['steps']:,} steps on {ppo['envs']} environments per policy; each "
+            f"score the mean return of {ppo['episodes']} surrogate real episodes of {ppo['episode_length']} steps. "
+            f"One process per pair (K in {', '.join(map(str, settings))}, S in {', '.join(map(str, seeds))}):", "",
+            "```bash", command, "```", "",
+            "| trained on | mean score | 95 % interval of the mean | minus uniform prior, paired: mean [95 % interval] "
+            "| minus nominal, paired |",
+            "|---|---:|---:|---:|---:|", *rows, "",
+            f"![{task}: score per pair and mean with its interval](figures/{self.name}_{task}.png)", "",
+            "Per setting (mean over seeds): " + "; ".join(by_setting) + ".", "",
+            verdict, "",
+            f"BayesSim took {spread([r['bayessim_seconds'] for r in runs], '.0f')} s per pair and each PPO run "
+            f"{spread([r[n]['training']['seconds'] for r in runs for n in trained_on], '.0f')} s, with up to "
+            f"{ctx.jobs} jobs sharing the machine. Per pair: [figures/{self.name}_{task}.json]"
+            f"(figures/{self.name}_{task}.json).",
+        ])
+
+
 @dataclasses.dataclass
 class ScriptSection:
     """A script that prints its section's markdown, heading first, to stdout (its progress goes to stderr), and
@@ -377,3 +456,43 @@ def _verdict(k: int, n: int, level: float) -> str:
     """Where the share's 95 % interval leaves out the level: the regions are too narrow or too wide."""
     low, high = clopper_pearson(k, n)
     return " (too narrow)" if high < level else " (too wide)" if low > level else ""
+
+
+def _interval(values: list[float]) -> str:
+    """Student's t 95 % interval of the mean."""
+    from scipy import stats
+
+    if len(values) < 2:
+        return "-"
+    half = stats.t.ppf(0.975, len(values) - 1) * statistics.stdev(values) / math.sqrt(len(values))
+    mean = statistics.fmean(values)
+    return f"[{mean - half:.1f}, {mean + half:.1f}]"
+
+
+def _paired(values: list[float], baseline: list[float]) -> str:
+    if values is baseline:
+        return "-"
+    diff = [a - b for a, b in zip(values, baseline)]
+    return f"{statistics.fmean(diff):+.1f} {_interval(diff)}"
+
+
+def _verdict_text(score: dict[str, list[float]], rounds: int) -> str:
+    """Where the last round's posterior helps and where it does not, from the paired intervals."""
+    from scipy import stats
+
+    parts = []
+    for baseline, label in (("prior", "uniform randomization"), ("nominal", "the nominal model"),
+                            ("posterior_round_1", "round 1's posterior")):
+        diff = [a - b for a, b in zip(score["posterior"], score[baseline])]
+        if len(diff) < 2 or statistics.stdev(diff) == 0:
+            parts.append(f"against {label}: no spread to test")
+            continue
+        half = stats.t.ppf(0.975, len(diff) - 1) * statistics.stdev(diff) / math.sqrt(len(diff))
+        mean = statistics.fmean(diff)
+        if mean - half > 0:
+            parts.append(f"better than {label} (paired difference {mean:+.1f}, interval above zero)")
+        elif mean + half < 0:
+            parts.append(f"**worse** than {label} (paired difference {mean:+.1f}, interval below zero)")
+        else:
+            parts.append(f"not distinguishable from {label} (paired difference {mean:+.1f}, interval across zero)")
+    return f"The round-{rounds} posterior's policy is " + "; ".join(parts) + "."

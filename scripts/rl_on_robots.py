@@ -1,0 +1,125 @@
+"""BayesSim's headline on a robot: PPO trained on the posterior (after round 1 and after the last round), on the
+uniform prior and on the nominal model, each evaluated on surrogate real systems away from the nominal
+(docs/results.md, section rl_on_robots).
+
+    OMP_NUM_THREADS=1 PYTHONPATH=src python scripts/rl_on_robots.py --task Cartpole --settings 0 1 2 \
+        --seeds 0 1 2 3 4 --out outputs/rl_on_robots/Cartpole.json
+
+A setting k is one surrogate real system: each hidden parameter sits at a prior quantile drawn (generator seeded
+with k) from [0.05, 0.2] or [0.8, 0.95], i.e. in the prior's tails, away from its centre where the MJCF's nominal
+values lie. For each setting and seed: the BayesSim rounds on that system (the pipeline as `python -m
+bayessim_exp`, rl=none), then rl=ppo's train_policy and evaluate stages with the same settings and seed on each
+of the four distributions; a policy's score is its mean return over `--episodes` surrogate real episodes.
+Finished (setting, seed) pairs in `--out` are kept and skipped, so a killed study resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+TRAINED_ON = ("posterior_round_1", "posterior", "prior", "nominal")
+TAILS = ((0.05, 0.2), (0.8, 0.95))
+
+
+def real_values(prior, names: list[str], setting: int) -> dict[str, float]:
+    """Setting `setting`'s hidden parameters: per parameter a prior quantile in one of TAILS (each tail equally likely)."""
+    rng = np.random.default_rng(setting)
+    tails = rng.integers(0, 2, len(names))
+    quantiles = np.array([rng.uniform(*TAILS[t]) for t in tails])
+    values = prior.marginal_icdf(torch.as_tensor(quantiles, dtype=torch.float64)[None])[0]
+    return {n: float(v) for n, v in zip(names, values)}
+
+
+def run_pair(task: str, setting: int, seed: int, args) -> dict:
+    from bayessim_exp import api, registry
+    from bayessim_exp.components import build_components
+    from bayessim_exp.rl.standalone import StandaloneRounds
+    from bayessim_exp.run_config import check_run_config
+
+    base = api.compose([f"task={task}", *args.overrides])
+    spec = registry.build("task", base.task).spec
+    real = real_values(registry.build("prior", base.prior, spec=spec), list(spec.names), setting)
+    overrides = [f"task={task}", f"seed={seed}", f"rounds={args.rounds}", "logging.progress=false",
+                 "diagnostics.predictive_sims=0", *[f"task.real_params.{n}={v!r}" for n, v in real.items()],
+                 *args.overrides]
+    rl_overrides = ["rl=ppo", f"rl.evaluate.episodes={args.episodes}", "rl.evaluate.video_steps=0", *args.rl_overrides]
+    run_dir = Path(args.run_dir) / f"{task}_setting{setting}_seed{seed}"
+    t0 = time.perf_counter()
+    api.run(overrides, out_dir=run_dir)  # BayesSim only (rl=none): PPO settings do not touch its run dir
+    row = {"setting": setting, "seed": seed, "real": real, "bayessim_seconds": round(time.perf_counter() - t0, 1)}
+    run = api.load_run(run_dir)
+    distributions = {"posterior_round_1": run.posterior(1), "posterior": run.posterior()}
+    for trained_on in TRAINED_ON:
+        train_on = trained_on if trained_on in ("prior", "nominal") else "posterior"
+        cfg = api.compose(overrides + rl_overrides + [f"rl.train_on={train_on}"])
+        comp = build_components(cfg, check_run_config(cfg))
+        distribution = distributions.get(trained_on, comp.prior)
+        rounds = StandaloneRounds(cfg, comp, distribution, run_dir / f"ppo_{trained_on}")
+        record = rounds.rl.record(rounds.run_round(1))
+        row[trained_on] = {"return": record["surrogate_real_return"], "training": record["rl_training"]}
+        row.setdefault("ppo", {"steps": cfg.rl.train.total_steps, "envs": cfg.rl.train.num_envs,
+                               "episodes": cfg.rl.evaluate.episodes, "episode_length": cfg.task.episode_length})
+        print(f"{task} setting {setting} seed {seed} {trained_on:>17s}: surrogate real return "
+              f"{record['surrogate_real_return']['mean']:.1f} ({record['rl_training']['seconds']:.0f} s of PPO)", flush=True)
+    return row
+
+
+def plot(results: dict, path: Path) -> None:
+    """Each pair's score per training distribution (dots, coloured by setting) and the mean with its 95 % interval."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy import stats
+
+    runs = results["runs"]
+    settings = sorted({r["setting"] for r in runs})
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    for i, name in enumerate(TRAINED_ON):
+        scores = np.array([r[name]["return"]["mean"] for r in runs])
+        colours = [f"C{settings.index(r['setting'])}" for r in runs]
+        ax.scatter(np.full(len(scores), i) + np.linspace(-0.12, 0.12, len(scores)), scores, c=colours, s=12, zorder=3)
+        half = stats.t.ppf(0.975, len(scores) - 1) * scores.std(ddof=1) / np.sqrt(len(scores)) if len(scores) > 1 else 0
+        ax.errorbar(i + 0.3, scores.mean(), yerr=half, fmt="o", color="k", capsize=4)
+    ax.set_xticks(range(len(TRAINED_ON)), ["posterior\nround 1", f"posterior\nround {results['rounds']}",
+                                           "uniform\nprior", "nominal"])
+    ax.set_ylabel("surrogate real return (mean of episodes)")
+    ax.set_title(f"{results['task']}: per pair (colour: setting), mean and 95 % interval", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="Cartpole")
+    parser.add_argument("--settings", type=int, nargs="+", default=[0, 1, 2], help="surrogate real systems (their seeds)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    parser.add_argument("--rounds", type=int, default=3, help="BayesSim rounds")
+    parser.add_argument("--episodes", type=int, default=16, help="surrogate real evaluation episodes per policy")
+    parser.add_argument("--overrides", nargs="*", default=[], help="more Hydra overrides for BayesSim")
+    parser.add_argument("--rl-overrides", nargs="*", default=[], help="more overrides for PPO (e.g. sim=mjx device=cuda)")
+    parser.add_argument("--out", default="outputs/rl_on_robots/Cartpole.json")
+    parser.add_argument("--run-dir", default="outputs/rl_on_robots/runs", help="parent of the per-pair run dirs")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    results = json.loads(out.read_text()) if out.exists() else {"task": args.task, "rounds": args.rounds, "runs": []}
+    done = {(r["setting"], r["seed"]) for r in results["runs"]}
+    for setting in args.settings:
+        for seed in args.seeds:
+            if (setting, seed) in done:
+                continue
+            results["runs"].append(run_pair(args.task, setting, seed, args))
+            out.write_text(json.dumps(results, indent=1))  # after every pair: a killed study keeps what finished
+
+
+if __name__ == "__main__":
+    main()

@@ -175,3 +175,17 @@ def test_nominal_values_leave_the_model_as_written(pendulum):
     assert np.allclose(model.body_ipos, pendulum.model.body_ipos)
     heavy = model_with_params(pendulum, np.array([2.0, 1.0]))
     assert heavy.body_mass[1] == pytest.approx(2 * pendulum.model.body_mass[1])
+
+
+def test_collector_choice_is_checked(compose):
+    from bayessim_exp.rl.env import SimulatorEnv, fixed_params
+    from bayessim_exp.rl.ppo import PPOTrainer
+
+    with pytest.raises(ConfigError, match="collector='gpu'.*auto, compiled, stepwise"):
+        registry.parse_params("rl", compose(["rl=ppo", "rl.train.collector=gpu"]).rl)
+    task, sim = pendulum_sim(compose, 4)  # native MuJoCo: no closed loops
+    train = registry.parse_params("rl", compose(["task=Pendulum", "rl=ppo", "debug=smoke",
+                                                 "rl.train.collector=compiled"]).rl)[1].train
+    trainer = PPOTrainer(train, task.obs_dim, task.action_dim)
+    with pytest.raises(ConfigError, match="collector=compiled needs sim=mjx"):
+        trainer.train(SimulatorEnv(sim, fixed_params(task.spec.nominal), 0), seed=0)

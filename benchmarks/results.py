@@ -9,7 +9,8 @@ time on the 2-core development machine, in 1,979 s (2026-11-25; 3,957 s of jobs,
 H100 machine's 16 cores (2026-11-23) the PPO section's 3 jobs with the methods section's 13 of then, 15 at a
 time, in 144 s (the longest, a PPO seed, 144 s; docs/results.md stamps each); the foreign-dynamics section (59 whole
 runs in its own pool) took 282 s with its fits on the GPU (`--device cuda`) and is estimated at two to three
-times that with CPU fits, its default here. Every methods and PPO job runs on one CPU thread (`sim=native
+times that with CPU fits, its default here; the robots section's 15 Cartpole jobs (BayesSim, then four PPO
+policies each), 2 at a time on the development machine, in 588 s (2026-11-26; 1,111 s of jobs, the longest 78 s). Every methods and PPO job runs on one CPU thread (`sim=native
 device=cpu`), so that a dozen processes do not share the GPU. `--sections` runs sections in separate calls
 where one call's time is short.
 

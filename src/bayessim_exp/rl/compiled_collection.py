@@ -81,11 +81,11 @@ class CompiledCollector:
             raise ValueError("the compiled collection needs a simulator that runs closed loops (sim=mjx)")
         self.env, self.agent, self.rollout_steps, self.total, self.noise = env, agent, rollout_steps, total, noise
         env.set_seed(seed)
-        self._episode_return = torch.zeros(env.sim.num_envs, device=env.sim.device)
 
     def __iter__(self) -> Iterator[TensorDict]:
         sim, steps = self.env.sim, self.rollout_steps
         self.env.reset()  # as the Collector's first reset: the draws of the step before the first
+        self._episode_return = torch.zeros(sim.num_envs, device=sim.device)
         for _ in range(self.total // (sim.num_envs * steps)):
             params, states = self.env.draws.take(steps)
             noise = self.noise((steps, sim.num_envs, sim.task.action_dim), sim.device)

@@ -13,7 +13,10 @@ GPU) after an untimed call of one batch on the same simulator: that first call c
 timed batch's is reported as compilation. Cartpole's run to 95 % of the 500 an episode can earn (the mean return
 of the training episodes finished in a batch) uses the same settings, within `--solve-steps` steps, on the
 collection path `rl.train.collector` picks, after the same untimed first batch. Step counts are rounded up to
-whole PPO batches (num_envs x rollout_steps).
+whole PPO batches (num_envs x rollout_steps). `--curve TASK` prints TASK's learning curve on its nominal model
+instead (how many steps a budget needs), e.g. `python benchmarks/rl.py --curve Ant --solve-steps 25000000
+--overrides sim=mjx device=cuda rl.train.num_envs=8192 rl.train.rollout_steps=16 rl.train.minibatch_size=32768
+rl.train.epochs=5`.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ def components(task: str, overrides: list[str], steps: int):
     return comp, build_rl(cfg, comp, lambda ctx: comp.prior)  # train_on=nominal asks for no distribution
 
 
-def train_once(comp, rl, collector: str, steps: int | None = None, seed: int = 0) -> dict:
+def train_once(comp, rl, collector: str, steps: int | None = None, seed: int = 0, on_batch=None) -> dict:
     """One PPO train call of `steps` steps (one batch when None) on the nominal model with `collector`."""
     import dataclasses
 
@@ -56,7 +59,7 @@ def train_once(comp, rl, collector: str, steps: int | None = None, seed: int = 0
     trainer = PPOTrainer(cfg, comp.task.obs_dim, comp.task.action_dim, rl.device)
     env = SimulatorEnv(sim, fixed_params(comp.task.spec.nominal), seed, draw_steps=cfg.rollout_steps)
     t0 = time.perf_counter()
-    curve = trainer.train(env, seed=seed)
+    curve = trainer.train(env, seed=seed, on_batch=on_batch)
     return {"steps": curve["steps"][-1], "seconds": time.perf_counter() - t0, "curve": curve, "batch": batch}
 
 
@@ -109,6 +112,27 @@ def time_to_95(overrides: list[str], solve_overrides: list[str], budget: int) ->
             "compile_s": max(0.0, first["seconds"] - per_batch), "best": float(np.nanmax(curve["episode_return"]))}
 
 
+def learning_curve(task: str, overrides: list[str], budget: int, lines: int = 20) -> None:
+    """`task`'s PPO on its nominal model for `budget` steps after an untimed first batch, printing about `lines`
+    points of its curve as it goes (seconds since the start, steps, mean return of the episodes that batch ended)."""
+    comp, rl = components(task, overrides, budget)
+    path = "compiled" if rl.train_cfg.collector != "stepwise" and compiled_available(comp, rl) else "stepwise"
+    first = train_once(comp, rl, path)
+    batch = first["batch"]
+    every = max(1, budget // batch // lines)
+    t0 = time.perf_counter()
+    print(f"{task} on its nominal model, {path} collection, first batch (compilation) {first['seconds']:.1f} s", flush=True)
+
+    def on_batch(steps: int, stats: dict) -> None:
+        if steps // batch % every == 0:
+            print(f"  {time.perf_counter() - t0:7.1f} s  {steps:>12,} steps  return {stats.get('episode_return', float('nan')):.1f}",
+                  flush=True)
+
+    curve = train_once(comp, rl, path, budget, on_batch=on_batch)["curve"]
+    print(f"{task}: best batch mean return {np.nanmax(curve['episode_return']):.1f} in {curve['steps'][-1]:,} steps, "
+          f"{curve['seconds'][-1]:.1f} s")
+
+
 def print_tables(rows: list[dict], solve: dict, overrides: list[str]) -> None:
     print(f"overrides: {' '.join(overrides) or '(none)'}; torch threads {torch.get_num_threads()}")
     print("| task | envs x steps, epochs x minibatch | simulator alone (baseline) | PPO, compiled collection "
@@ -140,10 +164,15 @@ def main() -> None:
     ap.add_argument("--solve-steps", type=int, default=80000, help="Cartpole's budget to reach 95 %% of the maximum")
     ap.add_argument("--overrides", nargs="*", default=[], help="Hydra overrides, e.g. sim=mjx device=cuda")
     ap.add_argument("--solve-overrides", nargs="*", default=[], help="more overrides for Cartpole's run to 95 %%")
+    ap.add_argument("--curve", default=None, metavar="TASK",
+                    help="instead of Cartpole's run to 95 %%: TASK's learning curve over --solve-steps steps")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)  # network initialisation
+    if args.curve:
+        learning_curve(args.curve, [*args.overrides, *args.solve_overrides], args.solve_steps)
+        return
     rows = [throughput(t, args.steps, args.stepwise_steps or args.steps, args.overrides) for t in args.tasks]
     solve = time_to_95(args.overrides, args.solve_overrides, args.solve_steps)
     print_tables(rows, solve, args.overrides)

@@ -460,13 +460,10 @@ def _verdict(k: int, n: int, level: float) -> str:
 
 def _interval(values: list[float]) -> str:
     """Student's t 95 % interval of the mean."""
-    from scipy import stats
+    from rl_on_robots import t_interval
 
-    if len(values) < 2:
-        return "-"
-    half = stats.t.ppf(0.975, len(values) - 1) * statistics.stdev(values) / math.sqrt(len(values))
-    mean = statistics.fmean(values)
-    return f"[{mean - half:.1f}, {mean + half:.1f}]"
+    interval = t_interval(values)
+    return "-" if interval is None else f"[{interval[0]:.1f}, {interval[1]:.1f}]"
 
 
 def _paired(values: list[float], baseline: list[float]) -> str:
@@ -478,20 +475,19 @@ def _paired(values: list[float], baseline: list[float]) -> str:
 
 def _verdict_text(score: dict[str, list[float]], rounds: int) -> str:
     """Where the last round's posterior helps and where it does not, from the paired intervals."""
-    from scipy import stats
+    from rl_on_robots import t_interval
 
     parts = []
     for baseline, label in (("prior", "uniform randomization"), ("nominal", "the nominal model"),
                             ("posterior_round_1", "round 1's posterior")):
         diff = [a - b for a, b in zip(score["posterior"], score[baseline])]
-        if len(diff) < 2 or statistics.stdev(diff) == 0:
-            parts.append(f"against {label}: no spread to test")
-            continue
-        half = stats.t.ppf(0.975, len(diff) - 1) * statistics.stdev(diff) / math.sqrt(len(diff))
+        interval = t_interval(diff)
         mean = statistics.fmean(diff)
-        if mean - half > 0:
+        if interval is None or interval[0] == interval[1]:
+            parts.append(f"against {label}: no spread to test")
+        elif interval[0] > 0:
             parts.append(f"better than {label} (paired difference {mean:+.1f}, interval above zero)")
-        elif mean + half < 0:
+        elif interval[1] < 0:
             parts.append(f"**worse** than {label} (paired difference {mean:+.1f}, interval below zero)")
         else:
             parts.append(f"not distinguishable from {label} (paired difference {mean:+.1f}, interval across zero)")

@@ -70,13 +70,23 @@ def run_pair(task: str, setting: int, seed: int, args) -> dict:
     return row
 
 
+def t_interval(values) -> tuple[float, float] | None:
+    """Student's t 95 % interval of the mean of `values`; None for fewer than two."""
+    from scipy import stats
+
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return None
+    half = stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / np.sqrt(len(values))
+    return float(values.mean() - half), float(values.mean() + half)
+
+
 def plot(results: dict, path: Path) -> None:
     """Each pair's score per training distribution (dots, coloured by setting) and the mean with its 95 % interval."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from scipy import stats
 
     runs = results["runs"]
     settings = sorted({r["setting"] for r in runs})
@@ -85,7 +95,8 @@ def plot(results: dict, path: Path) -> None:
         scores = np.array([r[name]["return"]["mean"] for r in runs])
         colours = [f"C{settings.index(r['setting'])}" for r in runs]
         ax.scatter(np.full(len(scores), i) + np.linspace(-0.12, 0.12, len(scores)), scores, c=colours, s=12, zorder=3)
-        half = stats.t.ppf(0.975, len(scores) - 1) * scores.std(ddof=1) / np.sqrt(len(scores)) if len(scores) > 1 else 0
+        interval = t_interval(scores)
+        half = 0.0 if interval is None else (interval[1] - interval[0]) / 2
         ax.errorbar(i + 0.3, scores.mean(), yerr=half, fmt="o", color="k", capsize=4)
     ax.set_xticks(range(len(TRAINED_ON)), ["posterior\nround 1", f"posterior\nround {results['rounds']}",
                                            "uniform\nprior", "nominal"])

@@ -3,6 +3,11 @@
     python benchmarks/results.py --jobs 14            # make results: the full budgets, docs/results.md + docs/figures/
     python benchmarks/results.py --quick --jobs 2     # tiny budgets into outputs/results_quick/ (never docs/)
     python benchmarks/results.py --sections methods   # only these sections; the others keep their current text
+    python benchmarks/results.py --resume             # a killed call's jobs go on from what they finished
+    python benchmarks/results.py --render-only        # render what a call left in outputs/results, as it stamped it
+
+Sections that train on a GPU (`needs_gpu`: the robots' PPO on MuJoCo Warp) are skipped, their text kept, where
+nvidia-smi lists no GPU; their jobs share the GPUs (`--gpus`, `--per-gpu` at once on each, CUDA_VISIBLE_DEVICES).
 
 Measured: the methods section's 139 jobs (18 at the tasks' truths, 120 known-truth runs, one closed loop), 2 at a
 time on the 2-core development machine, in 1,979 s (2026-11-25; 3,957 s of jobs, the longest 71 s); on the lent
@@ -25,18 +30,34 @@ Runs and logs go to outputs/results/ (quick: outputs/results_quick/), emptied pe
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import os
+import queue
 import re
 import shutil
 import socket
 import subprocess
+import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
 
-from results_sections import ROOT, TEMPLATES, Context, Job, MethodsSection, RlSection, RobotsSection, ScriptSection
+from results_sections import (
+    CPU_JOB,
+    GPU_PPO,
+    ROOT,
+    TEMPLATES,
+    Context,
+    Job,
+    MethodsSection,
+    RlSection,
+    RobotsSection,
+    ScriptSection,
+)
 
 SECTIONS = [
     MethodsSection(),
@@ -45,7 +66,16 @@ SECTIONS = [
                   quick_args=("--section", "--quick", "--jobs", "2", "--sources", "ours", "--settings", "1",
                               "--sine", "0"), cost=600.0),
     RlSection(),
-    RobotsSection(),
+    # per task: surrogate real settings, seeds, scripts/rl_on_robots.py's budget and backends
+    RobotsSection("rl_on_robots", {"Cartpole": ((0, 1, 2), (0, 1, 2, 3, 4),
+                                                ["--overrides", *CPU_JOB, "--rl-overrides", *CPU_JOB])}),
+    # BayesSim on one CPU thread, PPO on a GPU (MuJoCo Warp) for the budget of Ant's learning curve
+    # (docs/benchmarks.md); Ant's jobs start before Humanoid's
+    RobotsSection("rl_on_robots_gpu", {"Ant": ((0, 1, 2), (0, 1, 2, 3, 4), [
+        "--overrides", *CPU_JOB, "--rl-overrides", *GPU_PPO, "rl.train.total_steps=16777216"])},
+        needs_gpu=True, priority=1000.0),
+    RobotsSection("rl_on_robots_humanoid", {"Humanoid": ((0, 1, 2), (0, 1, 2, 3, 4), [
+        "--overrides", *CPU_JOB, "--rl-overrides", *GPU_PPO, "rl.train.total_steps=16777216"])}, needs_gpu=True),
 ]
 BLOCK = re.compile(r"<!-- section (\S+) -->\n(.*?)\n<!-- end \1 -->", re.S)
 
@@ -75,22 +105,44 @@ def machine() -> str:
     return f"{socket.gethostname()} ({os.cpu_count()} x {cpu}; {gpu}; {versions})"
 
 
-def run_jobs(jobs: list[Job], parallel: int, logs: Path) -> dict[str, float | None]:
-    """Each job's wall seconds, None where it failed (its log's tail printed); the longest-estimated start first."""
+def visible_gpus() -> list[str]:
+    """The indices nvidia-smi lists (none without it)."""
+    try:
+        listed = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return []
+    return [str(i) for i, line in enumerate(listed.splitlines()) if line.startswith("GPU ")]
+
+
+def run_jobs(jobs: list[Job], parallel: int, logs: Path, gpu_slots: list[str],
+             finished: Callable[[Job, float], None]) -> dict[str, float | None]:
+    """Each job's wall seconds, None where it failed (its log's tail printed); the longest-estimated start first.
+    A GPU job waits for one of `gpu_slots` (a GPU index per job it may run at once) and sees only that GPU.
+    `finished(job, seconds)` is called as each job succeeds."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1",
            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT / "src"), os.environ.get("PYTHONPATH")]))}
+    free = queue.SimpleQueue()
+    for slot in gpu_slots:
+        free.put(slot)
 
     def one(job: Job) -> float | None:
         log = logs / f"{job.name}.log"
         log.parent.mkdir(parents=True, exist_ok=True)
         if job.stdout:
             job.stdout.parent.mkdir(parents=True, exist_ok=True)
+        gpu = free.get() if job.gpu and gpu_slots else None
         start = time.perf_counter()
-        with open(log, "w") as err, open(job.stdout or os.devnull, "w") as out:
-            done = subprocess.run(job.argv, cwd=ROOT, env=env, stdout=out if job.stdout else err, stderr=err)
+        try:
+            with open(log, "w") as err, open(job.stdout or os.devnull, "w") as out:
+                done = subprocess.run(job.argv, cwd=ROOT, env=env if gpu is None else {**env, "CUDA_VISIBLE_DEVICES": gpu},
+                                      stdout=out if job.stdout else err, stderr=err)
+        finally:
+            if gpu is not None:
+                free.put(gpu)
         seconds = time.perf_counter() - start
         if done.returncode == 0:
             print(f"  {job.name}: {seconds:.0f} s", flush=True)
+            finished(job, seconds)
             return seconds
         tail = "\n    ".join(log.read_text().splitlines()[-15:])
         print(f"  {job.name}: FAILED ({done.returncode}) after {seconds:.0f} s, log {log}:\n    {tail}", flush=True)
@@ -112,6 +164,36 @@ def assemble(previous: str, fresh: dict[str, str]) -> str:
     return "\n\n".join(parts) + "\n"
 
 
+class Record:
+    """What a call ran, in each section's work dir (generated.json): the line that stamps the section and each
+    finished job's seconds, written as jobs finish, so that `--render-only` renders what a killed call left."""
+
+    def __init__(self, work: Path):
+        self.path, self.lock = work / "generated.json", threading.Lock()
+
+    def start(self, line: str, stamp: str, jobs: int, resume: bool) -> None:
+        """A fresh record, or with `resume` the earlier call's, its line noting this call's stamp."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if resume and self.path.exists():
+            record = self.read()
+            record["line"] += f"; resumed {stamp}"
+        else:
+            record = {"line": f"{line}, {stamp}", "jobs": jobs, "seconds": {}}
+        self.path.write_text(json.dumps(record, indent=1))
+
+    def finished(self, job: Job, seconds: float) -> None:
+        """A job's seconds, unless an earlier call measured it (a resumed job skips what it finished)."""
+        with self.lock:
+            record = self.read()
+            record["seconds"].setdefault(job.name, seconds)
+            self.path.write_text(json.dumps(record, indent=1))
+
+    def read(self) -> dict:
+        if not self.path.exists():
+            raise SystemExit(f"{self.path} is missing: no call of results.py ran this section in this work dir")
+        return json.loads(self.path.read_text())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--jobs", type=int, default=max(1, (os.cpu_count() or 2) - 2), help="processes at a time")
@@ -120,32 +202,57 @@ def main() -> None:
     ap.add_argument("--out", type=Path, help="the markdown written (default: docs/results.md; quick: "
                                              "outputs/results_quick/results.md); figures go to figures/ beside it")
     ap.add_argument("--work", type=Path, help="runs and logs (default: outputs/results or outputs/results_quick)")
+    ap.add_argument("--gpus", nargs="*", help="GPU indices the GPU jobs share (default: all nvidia-smi lists)")
+    ap.add_argument("--per-gpu", type=int, default=4, help="GPU jobs at once per GPU (a job's BayesSim part uses "
+                                                           "only a CPU thread, its PPO the GPU)")
+    ap.add_argument("--render-only", action="store_true", help="run no job: render the sections from what an "
+                    "earlier call (killed, or on another machine) left in the work dir, stamped as that call")
+    ap.add_argument("--resume", action="store_true", help="keep the work dir: jobs skip what an earlier call "
+                    "finished (the sections' scripts resume), and the stamp names both calls")
     args = ap.parse_args()
+    gpus = visible_gpus() if args.gpus is None else args.gpus
     out = args.out or ROOT / ("outputs/results_quick/results.md" if args.quick else "docs/results.md")
     if args.quick and out.resolve().is_relative_to((ROOT / "docs").resolve()):
         raise SystemExit("--quick writes outside docs/: its numbers are no results")
     work = args.work or ROOT / ("outputs/results_quick" if args.quick else "outputs/results")
-    chosen = [s for s in SECTIONS if not args.sections or s.name in args.sections]
-    stamp = f"commit {commit()}, {machine()}, {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC"
+    chosen = [s for s in SECTIONS if s.name in args.sections] if args.sections else [
+        s for s in SECTIONS if args.quick or args.render_only or gpus or not getattr(s, "needs_gpu", False)]
+    for section in SECTIONS:
+        if section not in chosen and not args.sections:
+            print(f"{section.name}: skipped, it trains on a GPU and none is visible (its previous text kept)")
     ctx = {s.name: Context(work=work / s.name, figures=out.parent / "figures", quick=args.quick, jobs=args.jobs)
            for s in chosen}
-    for section in chosen:
-        shutil.rmtree(ctx[section.name].work, ignore_errors=True)
+    records = {s.name: Record(ctx[s.name].work) for s in chosen}
+    if args.render_only:  # the text quotes the processes at a time of the call that ran the jobs
+        ctx = {name: dataclasses.replace(c, jobs=records[name].read()["jobs"]) for name, c in ctx.items()}
     jobs = {s.name: s.jobs(ctx[s.name]) for s in chosen}
-    print(f"{sum(map(len, jobs.values()))} jobs, {args.jobs} at a time; logs in {work / 'logs'}", flush=True)
-    start = time.perf_counter()
-    seconds = run_jobs([j for js in jobs.values() for j in js], args.jobs, work / "logs")
-    print(f"jobs done in {time.perf_counter() - start:.0f} s", flush=True)
+    if not args.render_only:
+        stamp = f"commit {commit()}, {machine()}, {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC"
+        mode = " --quick" if args.quick else ""
+        for section in chosen:
+            if not args.resume:
+                shutil.rmtree(ctx[section.name].work, ignore_errors=True)
+            on_gpus = any(j.gpu for j in jobs[section.name]) and gpus
+            sharing = f" --per-gpu {args.per_gpu}" if on_gpus else ""
+            records[section.name].start(f"Generated by `python benchmarks/results.py{mode} --jobs {args.jobs}{sharing} "
+                                        f"--sections {section.name}`{f' ({len(gpus)} GPUs)' if on_gpus else ''}",
+                                        stamp, args.jobs, args.resume)
+        print(f"{sum(map(len, jobs.values()))} jobs, {args.jobs} at a time; logs in {work / 'logs'}", flush=True)
+        start = time.perf_counter()
+        run_jobs([j for js in jobs.values() for j in js], args.jobs, work / "logs",
+                 [gpu for _ in range(args.per_gpu) for gpu in gpus],
+                 lambda job, seconds: records[job.name.split("/")[0]].finished(job, seconds))
+        print(f"jobs done in {time.perf_counter() - start:.0f} s", flush=True)
 
     fresh, failed = {}, []
     for section in chosen:
-        took = [seconds[j.name] for j in jobs[section.name]]
-        if None in took:
+        record = records[section.name].read()
+        took = [record["seconds"][j.name] for j in jobs[section.name] if j.name in record["seconds"]]
+        if len(took) < len(jobs[section.name]):
+            print(f"{section.name}: {len(took)} of {len(jobs[section.name])} jobs finished; not rendered", flush=True)
             failed.append(section.name)
             continue
-        mode = " --quick" if args.quick else ""
-        line = (f"Generated by `python benchmarks/results.py{mode} --jobs {args.jobs} --sections {section.name}`, "
-                f"{stamp}; its jobs ran {max(took, default=0):.0f} s at most, {sum(took):.0f} s in all.")
+        line = f"{record['line']}; its jobs ran {max(took, default=0):.0f} s at most, {sum(took):.0f} s in all."
         try:
             fresh[section.name] = section.render(ctx[section.name], line)
         except Exception as exc:  # a section that cannot render keeps its previous text; the others are written

@@ -30,6 +30,9 @@ from bayessim_exp.report.jobs import read_jobs  # noqa: E402
 
 # every job runs on the CPU on one thread, so that 14 jobs share 16 cores without a GPU in the way
 CPU_JOB = ["sim=native", "sim.nthread=1", "device=cpu", "logging.progress=false"]
+# PPO on the GPU with MuJoCo Warp, the batch of docs/benchmarks.md's "RL at GPU speed" (8,192 x 16, 5 x 32,768)
+GPU_PPO = ["sim=mjx", "sim.impl=warp", "device=cuda", "rl.train.num_envs=8192", "rl.train.rollout_steps=16",
+           "rl.train.minibatch_size=32768", "rl.train.epochs=5"]
 
 
 class SectionError(RuntimeError):
@@ -42,6 +45,7 @@ class Job:
     argv: list[str]
     cost: float             # estimated seconds on one core at the full budget: the longest start first
     stdout: Path | None = None  # where stdout goes (stderr to the log); None: both to the log
+    gpu: bool = False       # runs on one GPU of those results.py shares out (CUDA_VISIBLE_DEVICES)
 
 
 @dataclasses.dataclass
@@ -330,43 +334,60 @@ class RlSection:
 
 class RobotsSection:
     """BayesSim's headline on robots (scripts/rl_on_robots.py): per task, PPO on the round-1 and last-round
-    posteriors, on the uniform prior and on the nominal model, over surrogate real settings x seeds, one process
-    per (setting, seed); the per-task JSON and the figure go to ctx.figures."""
+    posteriors, on the uniform prior and on the nominal model, over surrogate real settings x seeds. Jobs: one per
+    (setting, seed) for BayesSim and the posteriors' policies, one per seed for the baselines' (trained once,
+    scored on every setting). The per-task JSON and the figure go to ctx.figures. A section with `needs_gpu` trains
+    PPO on a GPU in the full mode; its quick mode runs the same code on the CPU at smoke budgets."""
 
-    name = "rl_on_robots"
-    # per task: settings, seeds, and the script's further arguments (PPO's own task settings on one CPU thread)
-    tasks = {"Cartpole": ((0, 1, 2), (0, 1, 2, 3, 4), ["--overrides", *CPU_JOB, "--rl-overrides", *CPU_JOB])}
     quick = ["--rounds", "2", "--episodes", "2", "--overrides", *CPU_JOB, "debug=smoke", "--rl-overrides", *CPU_JOB,
              "debug=smoke"]
 
-    def _pairs(self, ctx: Context):
-        for task, (settings, seeds, _) in self.tasks.items():
-            for setting, seed in itertools.product(settings[:1], seeds[:1]) if ctx.quick else itertools.product(
-                    settings, seeds):
-                yield task, setting, seed
+    def __init__(self, name: str, tasks: dict[str, tuple[tuple[int, ...], tuple[int, ...], list[str]]],
+                 needs_gpu: bool = False, priority: float = 0.0):
+        self.name, self.needs_gpu, self.priority = name, needs_gpu, priority
+        self.tasks = tasks  # per task: settings, seeds, and the script's further arguments (budgets, backends)
 
-    def _argv(self, ctx: Context, task: str, setting: int, seed: int) -> list[str]:
-        extra = self.quick if ctx.quick else self.tasks[task][2]
-        return [sys.executable, "scripts/rl_on_robots.py", "--task", task, "--settings", str(setting), "--seeds",
-                str(seed), *extra, "--out", str(ctx.work / f"{task}_{setting}_{seed}.json"),
+    def _studies(self, ctx: Context):
+        for task, (settings, seeds, _) in self.tasks.items():
+            yield task, (settings[:1], seeds[:1]) if ctx.quick else (settings, seeds)
+
+    def _parts(self, ctx: Context):
+        """Each job's task, name, settings, seeds and policies: per seed its baselines (first: two trainings
+        without BayesSim before them), then its pairs."""
+        from rl_on_robots import BASELINES, POSTERIORS
+
+        for task, (settings, seeds) in self._studies(ctx):
+            for seed in seeds:
+                yield task, f"{task}_baselines_seed{seed}", settings, [seed], BASELINES
+                for setting in settings:
+                    yield task, f"{task}_setting{setting}_seed{seed}", [setting], [seed], POSTERIORS
+
+    def _argv(self, ctx: Context, task: str, settings, seeds, trained_on=None, out: Path | None = None) -> list[str]:
+        return [sys.executable, "scripts/rl_on_robots.py", "--task", task, "--settings", *map(str, settings),
+                "--seeds", *map(str, seeds), *(["--trained-on", *trained_on] if trained_on else []),
+                *(self.quick if ctx.quick else self.tasks[task][2]), "--out", str(out or ctx.work / f"{task}.json"),
                 "--run-dir", str(ctx.work / "runs")]
 
     def jobs(self, ctx: Context) -> list[Job]:
-        return [Job(f"{self.name}/{task}_setting{setting}_seed{seed}", self._argv(ctx, task, setting, seed), 300)
-                for task, setting, seed in self._pairs(ctx)]
+        gpu = self.needs_gpu and not ctx.quick
+        # a section's jobs start before those of a section of lower priority, a seed's baselines before its pairs
+        return [Job(f"{self.name}/{name}", self._argv(ctx, task, settings, seeds, trained_on, ctx.work / f"{name}.json"),
+                    self.priority + (400 if len(settings) > 1 else 300), gpu=gpu)
+                for task, name, settings, seeds, trained_on in self._parts(ctx)]
 
     def render(self, ctx: Context, stamp: str) -> str:
-        from rl_on_robots import TRAINED_ON, plot
+        from rl_on_robots import TRAINED_ON, merge, plot
 
         per_task: dict[str, dict] = {}
-        for task, setting, seed in self._pairs(ctx):
-            part = json.loads((ctx.work / f"{task}_{setting}_{seed}.json").read_text())
-            per_task.setdefault(task, {**part, "runs": []})["runs"] += part["runs"]
+        for task, name, *_ in self._parts(ctx):
+            part = json.loads((ctx.work / f"{name}.json").read_text())
+            results = per_task.setdefault(task, {**part, "runs": []})
+            results["runs"] = merge(results["runs"], part["runs"])
         ctx.figures.mkdir(parents=True, exist_ok=True)
         blocks = []
         for task, results in per_task.items():
-            (ctx.figures / f"{self.name}_{task}.json").write_text(json.dumps(results, indent=1))
-            plot(results, ctx.figures / f"{self.name}_{task}.png")
+            (ctx.figures / f"rl_on_robots_{task}.json").write_text(json.dumps(results, indent=1))
+            plot(results, ctx.figures / f"rl_on_robots_{task}.png")
             blocks.append(self._task_block(ctx, task, results, TRAINED_ON))
         return template(self.name).substitute(stamp=stamp, tasks="\n\n".join(blocks))
 
@@ -384,26 +405,26 @@ class RobotsSection:
             f"{labels[n].split(' (')[0]} {statistics.fmean(r[n]['return']['mean'] for r in runs if r['setting'] == k):.1f}"
             for n in trained_on) for k in settings]
         ppo = runs[0]["ppo"]
-        verdict = _verdict_text(score, results["rounds"])
-        command = python_command(self._argv(ctx, task, settings[0], seeds[0]))
-        command = command.replace(f"--settings {settings[0]}", "--settings K").replace(f"--seeds {seeds[0]}", "--seeds S")
         return "\n".join([
             f"### {task}", "",
             f"{len(settings)} surrogate real settings x {len(seeds)} seeds = {len(runs)} pairs; {results['rounds']} "
             f"BayesSim rounds per pair; PPO {ppo['steps']:,} steps on {ppo['envs']} environments per policy; each "
             f"score the mean return of {ppo['episodes']} surrogate real episodes of {ppo['episode_length']} steps. "
-            f"One process per pair (K in {', '.join(map(str, settings))}, S in {', '.join(map(str, seeds))}):", "",
-            "```bash", command, "```", "",
+            "The whole study in one process (results.py runs it as one job per pair and one per seed for the "
+            "uniform prior's and the nominal policies, which do not depend on the setting):", "",
+            "```bash", python_command(self._argv(ctx, task, settings, seeds)), "```", "",
             "| trained on | mean score | 95 % interval of the mean | minus uniform prior, paired: mean [95 % interval] "
             "| minus nominal, paired |",
             "|---|---:|---:|---:|---:|", *rows, "",
-            f"![{task}: score per pair and mean with its interval](figures/{self.name}_{task}.png)", "",
+            f"![{task}: score per pair and mean with its interval](figures/rl_on_robots_{task}.png)", "",
             "Per setting (mean over seeds): " + "; ".join(by_setting) + ".", "",
-            verdict, "",
+            _verdict_text(score, results["rounds"]), "",
             f"BayesSim took {spread([r['bayessim_seconds'] for r in runs], '.0f')} s per pair and each PPO run "
             f"{spread([r[n]['training']['seconds'] for r in runs for n in trained_on], '.0f')} s, with up to "
-            f"{ctx.jobs} jobs sharing the machine. Per pair: [figures/{self.name}_{task}.json]"
-            f"(figures/{self.name}_{task}.json).",
+            f"{ctx.jobs} jobs sharing the machine. PPO's mean training return in its last batch (on the distribution "
+            "it trained on), mean over the policies: " + ", ".join(
+                f"{labels[n].split(' (')[0]} {_mean_finite(r[n]['training']['last_episode_return'] for r in runs)}"
+                for n in trained_on) + f". Per pair: [figures/rl_on_robots_{task}.json](figures/rl_on_robots_{task}.json).",
         ])
 
 
@@ -450,6 +471,12 @@ def _width(results: dict, name: str) -> float:
 
 def _number(value: float | None) -> str:
     return "-" if value is None else f"{value:.0f}"
+
+
+def _mean_finite(values) -> str:
+    """The mean of the values that are numbers ("-" for none): a run whose episodes never ended has none."""
+    finite = [v for v in values if v is not None and math.isfinite(v)]
+    return f"{statistics.fmean(finite):.1f}" if finite else "-"
 
 
 def _verdict(k: int, n: int, level: float) -> str:

@@ -33,12 +33,17 @@
 #                and the runs $ROUND_ALSO (TASK:SEED ...), device=cuda and $ROUND_ARGS (e.g. sim=native), $JOBS at once
 #   foreign      benchmarks/foreign_dynamics.py, 14 runs at once simulating on the CPUs, fitting on the GPU
 #   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
+#   robots       benchmarks/results.py's GPU sections (issue 29: Ant and Humanoid, posterior / prior / nominal PPO),
+#                $JOBS processes at once (default 16), $PER_GPU of them per GPU (default 4), work in
+#                /tmp/robots_work (RESUME=1: resume what is there); docs/results.md and the figures into $OUT
 #
 #   background STEP...  the steps, started in their own process session so that they outlast this call (a warm
 #                machine keeps them running until it goes back): their logs and files go to /tmp/background_out
 #   collect      what the background steps have written so far, copied into $OUT (their logs' tails printed), and
 #                the run directories of studies under /tmp/calibration_*, tarred (results, configs, errors), with
-#                how many runs finished every round (results.json is rewritten after each)
+#                how many runs finished every round (results.json is rewritten after each); the robots step's
+#                finished jobs (their JSON, generated.json and logs) as $OUT/robots_work.tar.gz, for --resume or
+#                --render-only here
 #
 # Logs and JSON go to $OUT (./device_out where OUT is unset), one log per step, each headed by the commit, the
 # machine and the date. Every step runs even when an earlier one failed; the exit status is 1 if any failed.
@@ -220,6 +225,14 @@ step_results() {
     "$PY" benchmarks/results.py --jobs 14 && cp docs/results.md docs/figures/rl_posterior_vs_prior.* "$OUT/"
 }
 
+step_robots() {
+    "$PY" benchmarks/results.py --jobs "${JOBS:-16}" --per-gpu "${PER_GPU:-4}" --work /tmp/robots_work \
+        ${RESUME:+--resume} --sections rl_on_robots_gpu rl_on_robots_humanoid
+    local rc=$?
+    cp docs/results.md docs/figures/rl_on_robots_Ant.* docs/figures/rl_on_robots_Humanoid.* "$OUT/" 2>/dev/null
+    return $rc
+}
+
 run_step() {  # run_step NAME: step_NAME logged to $OUT/NAME.log, stopped after STEP_TIMEOUT seconds
     local name=$1 log="$OUT/$1.log"
     { stamp; echo "step: $name"; echo; } >"$log"
@@ -250,6 +263,10 @@ print(', '.join(f'{n} {s}' for s, n in sorted(collections.Counter(j.status for j
         (cd /tmp && tar -czf "$OUT/$dir.tar.gz" "$dir"/report "$dir"/*/results.json "$dir"/*/config.yaml \
             "$dir"/*/.hydra "$dir"/*/error.txt 2>/dev/null)  # the calibration step's report too, when there is one
     done
+    if [ -d /tmp/robots_work ]; then
+        (cd /tmp/robots_work && tar -czf "$OUT/robots_work.tar.gz" logs */*.json 2>/dev/null)
+        say "robots: $(ls /tmp/robots_work/*/*_seed*.json 2>/dev/null | wc -l) jobs finished or under way"
+    fi
     exit 0
 fi
 if [ "${1:-}" = background ]; then  # the steps in a new session: it installs, then runs them, after this call ends
@@ -277,7 +294,7 @@ failed=()
 for step in "$@"; do
     case $step in
         stash-warp) ;;
-        tests|model_fit|default_run|throughput|throughput16k|humanoid|auto_table|rl_gpu|rl_cpu|calibration|round_coverage|foreign|results)
+        tests|model_fit|default_run|throughput|throughput16k|humanoid|auto_table|rl_gpu|rl_cpu|calibration|round_coverage|foreign|results|robots)
             run_step "$step" || failed+=("$step") ;;
         *) say "unknown step: $step"; failed+=("$step") ;;
     esac

@@ -14,7 +14,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import results  # noqa: E402  benchmarks/results.py
-from results_sections import Context, MethodsSection, RlSection, ScriptSection, SectionError  # noqa: E402
+from results_sections import Context, Job, MethodsSection, RlSection, ScriptSection, SectionError  # noqa: E402
 
 
 def test_the_committed_page_is_what_the_assembler_writes_from_it():
@@ -124,7 +124,7 @@ def test_a_script_section_is_its_scripts_stdout_under_the_stamp_and_a_failing_on
     broken.write_text("raise SystemExit('no data')\n")
     ctx = Context(work=tmp_path / "work", figures=tmp_path, quick=True, jobs=2)
     good, bad = ScriptSection("foreign", str(script), quick_args=("--tiny",)), ScriptSection("bad", str(broken))
-    seconds = results.run_jobs(good.jobs(ctx) + bad.jobs(ctx), 2, tmp_path / "logs")
+    seconds = results.run_jobs(good.jobs(ctx) + bad.jobs(ctx), 2, tmp_path / "logs", [], lambda job, s: None)
     assert seconds["bad"] is None and "no data" in capsys.readouterr().out
     assert good.render(ctx, "STAMP").splitlines() == [
         "## Foreign dynamics", "", f"`python {script} --tiny`: STAMP", "", "A table."]
@@ -134,3 +134,42 @@ def test_quick_mode_refuses_to_write_into_docs(monkeypatch):
     monkeypatch.setattr(sys, "argv", ["results.py", "--quick", "--out", str(ROOT / "docs" / "results.md")])
     with pytest.raises(SystemExit, match="outside docs"):
         results.main()
+
+
+def _env_job(name: str, out: Path, gpu: bool) -> Job:
+    """A job that writes the GPU it sees, holding it a moment so that the jobs overlap."""
+    code = "import os, time; time.sleep(0.5); print(os.environ.get('CUDA_VISIBLE_DEVICES', 'all'))"
+    return Job(name, [sys.executable, "-c", code], 1.0, stdout=out / f"{name}.txt", gpu=gpu)
+
+
+def test_gpu_jobs_each_see_one_gpu_of_the_slots_and_cpu_jobs_are_left_alone(tmp_path, monkeypatch):
+    monkeypatch.delenv("CUDA_VISIBLE_DEVICES", raising=False)
+    jobs = [_env_job(f"gpu{i}", tmp_path, True) for i in range(6)] + [_env_job("cpu", tmp_path, False)]
+    finished = []
+    results.run_jobs(jobs, 7, tmp_path / "logs", ["0", "1", "0", "1"], lambda job, s: finished.append(job.name))
+    seen = {j.name: (tmp_path / f"{j.name}.txt").read_text().strip() for j in jobs}
+    assert seen.pop("cpu") == "all" and sorted(set(seen.values())) == ["0", "1"]
+    assert sorted(finished) == sorted(j.name for j in jobs)
+
+
+def test_a_killed_call_renders_what_finished_only_and_a_resumed_one_names_both_calls(tmp_path, monkeypatch):
+    script = tmp_path / "section.py"
+    script.write_text("print('## Section\\n\\nA table.')\n")
+    monkeypatch.setattr(results, "SECTIONS", [ScriptSection("one", str(script), quick_args=())])
+    argv = ["results.py", "--quick", "--jobs", "1", "--out", str(tmp_path / "out" / "results.md"),
+            "--work", str(tmp_path / "work")]
+    monkeypatch.setattr(sys, "argv", argv)
+    results.main()
+    first = (tmp_path / "out" / "results.md").read_text()
+    monkeypatch.setattr(sys, "argv", argv + ["--render-only"])
+    results.main()
+    assert (tmp_path / "out" / "results.md").read_text() == first  # the same stamp, read from the work dir
+    record = tmp_path / "work" / "one" / "generated.json"
+    killed = {**json.loads(record.read_text()), "seconds": {}}  # as if the call had been killed before its job ended
+    record.write_text(json.dumps(killed))
+    with pytest.raises(SystemExit, match="failed: one"):
+        results.main()
+    monkeypatch.setattr(sys, "argv", argv + ["--resume"])
+    results.main()
+    resumed = json.loads(record.read_text())
+    assert resumed["line"].startswith(killed["line"] + "; resumed commit ") and list(resumed["seconds"]) == ["one"]

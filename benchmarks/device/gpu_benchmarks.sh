@@ -35,7 +35,8 @@
 #   results      benchmarks/results.py --jobs 14 (docs/results.md and its figure, copied into $OUT)
 #   robots       benchmarks/results.py's GPU sections (issue 29: Ant and Humanoid, posterior / prior / nominal PPO),
 #                $JOBS processes at once (default 16), $PER_GPU of them per GPU (default 4), work in
-#                /tmp/robots_work (RESUME=1: resume what is there); docs/results.md and the figures into $OUT
+#                /tmp/robots_work (RESUME=1: resume what is there), after Warp's kernels are compiled by one
+#                process; docs/results.md and the figures into $OUT
 #
 #   background STEP...  the steps, started in their own process session so that they outlast this call (a warm
 #                machine keeps them running until it goes back): their logs and files go to /tmp/background_out
@@ -226,6 +227,9 @@ step_results() {
 }
 
 step_robots() {
+    # MuJoCo Warp compiles its kernels into ~/.cache/warp at a process's first step: once here, not in 16 at once
+    "$PY" benchmarks/sim_throughput.py --tasks Ant,Humanoid --impl warp --rows mjx --envs 64 --horizon 2 --reps 1 \
+        --compile-only || return 1
     "$PY" benchmarks/results.py --jobs "${JOBS:-16}" --per-gpu "${PER_GPU:-4}" --work /tmp/robots_work \
         ${RESUME:+--resume} --sections rl_on_robots_gpu rl_on_robots_humanoid
     local rc=$?

@@ -252,7 +252,8 @@ def main() -> None:
             print(f"{section.name}: {len(took)} of {len(jobs[section.name])} jobs finished; not rendered", flush=True)
             failed.append(section.name)
             continue
-        line = f"{record['line']}; its jobs ran {max(took, default=0):.0f} s at most, {sum(took):.0f} s in all."
+        rendered = f"; rendered by --render-only at commit {commit()}" if args.render_only else ""
+        line = f"{record['line']}; its jobs ran {max(took, default=0):.0f} s at most, {sum(took):.0f} s in all{rendered}."
         try:
             fresh[section.name] = section.render(ctx[section.name], line)
         except Exception as exc:  # a section that cannot render keeps its previous text; the others are written

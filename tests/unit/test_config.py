@@ -50,6 +50,14 @@ def test_smoke_shrinks_the_epochs_of_every_model_trained_in_epochs(compose, name
         assert smoke.max_epochs < full.max_epochs and smoke.patience < full.patience
 
 
+def test_smoke_shrinks_the_importance_sampled_posteriors_and_a_tiny_pool_is_refused(compose, tmp_path):
+    from bayessim_exp.errors import ConfigError
+
+    assert compose(["debug=smoke"]).method.importance_draws < compose([]).method.importance_draws  # conf/method_debug
+    with pytest.raises(ConfigError, match="importance_draws must be >= 1000"):
+        Pipeline(compose(["method.importance_draws=10"]), tmp_path)
+
+
 @pytest.mark.parametrize("group, name", OPTIONS)
 def test_defaults_are_written_once_in_the_yaml(compose, group, name):
     text = (CONF / group / f"{name}.yaml").read_text()

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 import torch
 
-from .correction import MAX_COMPONENTS, moments, posterior
+from .correction import IMPORTANCE_DRAWS, MAX_COMPONENTS, moments, posterior
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +70,8 @@ def dispersion(singles: Sequence, seed: int = 0) -> Dispersion:
 
 
 def combine(method: str, conditionals: Sequence, prior, proposal=None, *, max_components: int = MAX_COMPONENTS,
-            seed: int = 0, temperature: float = 1.0) -> tuple[object, Dispersion | None]:
+            seed: int = 0, temperature: float = 1.0,
+            importance_draws: int = IMPORTANCE_DRAWS) -> tuple[object, Dispersion | None]:
     """The posterior given every real summary's conditional q(theta | x_i), and the dispersion of the
     per-trajectory posteriors (None for a single trajectory). `temperature` in (0, 1] multiplies the
     one the combination chooses (the replayed check's widening, inference/bayessim/replay_tempering.py)."""
@@ -78,13 +79,14 @@ def combine(method: str, conditionals: Sequence, prior, proposal=None, *, max_co
         raise ValueError(f"combination {method!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
     if len(conditionals) == 1:
         return posterior(conditionals, prior, proposal, max_components=max_components, seed=seed,
-                         temperature=temperature), None
+                         temperature=temperature, importance_draws=importance_draws), None
     proposals = list(proposal) if isinstance(proposal, (list, tuple)) else [proposal] * len(conditionals)
-    singles = [posterior([q], prior, p, max_components=max_components, seed=seed) for q, p in zip(conditionals, proposals)]
+    singles = [posterior([q], prior, p, max_components=max_components, seed=seed, importance_draws=importance_draws)
+               for q, p in zip(conditionals, proposals)]
     spread = dispersion(singles, seed)
     tau = spread.temperature if method == "dispersion" else 1.0
     if spread.birge_ratio > 1.0 and temperature == 1.0:
         log.info("real trajectories disagree beyond their posteriors' widths: Birge ratio %.2f (chi2 p = %.2g)%s",
                  spread.birge_ratio, spread.p_value, f"; tempering by {tau:.3f}" if tau < 1 else "")
     return posterior(conditionals, prior, proposal, max_components=max_components, seed=seed,
-                     temperature=tau * temperature), spread
+                     temperature=tau * temperature, importance_draws=importance_draws), spread

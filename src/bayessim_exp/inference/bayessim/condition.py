@@ -18,38 +18,42 @@ from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...models.base import PosteriorModel
 from .combination import Dispersion, combine
-from .correction import MAX_COMPONENTS, needs_no_correction, tempered_posterior
+from .correction import IMPORTANCE_DRAWS, MAX_COMPONENTS, needs_no_correction, tempered_posterior
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = MAX_COMPONENTS, proposal=None,
               seed: int = 0, probit: ProbitTransform | None = None, combination: str = "dispersion",
-              temperature: float = 1.0) -> tuple[ParameterDistribution, Dispersion | None]:
+              temperature: float = 1.0,
+              importance_draws: int = IMPORTANCE_DRAWS) -> tuple[ParameterDistribution, Dispersion | None]:
     """The posterior given x_obs [n, F] (or one summary [F]), and the dispersion of the per-trajectory
     posteriors (None for one summary); `combination` says how several summaries are combined
     (combination.py), `temperature` widens it further (combine).
 
     prior None means an improper flat prior (no truncation); proposal None means simulations from the prior.
     probit: the transform the model's parameters were fitted in, or None for parameter units.
+    importance_draws: the base draws of a posterior without a closed form (correction.py).
     """
     conditionals = [model.conditional(x) for x in x_obs.reshape(-1, x_obs.shape[-1])]
     if probit is None:
         return combine(combination, conditionals, prior, proposal, max_components=max_components, seed=seed,
-                       temperature=temperature)
+                       temperature=temperature, importance_draws=importance_draws)
     post, spread = combine(combination, conditionals, standard_normal_prior(probit.dim),
                            _probit_proposal(proposal, prior), max_components=max_components, seed=seed,
-                           temperature=temperature)
+                           temperature=temperature, importance_draws=importance_draws)
     return ProbitPosterior(post, probit), spread
 
 
 def tempered_product(conditionals: list, prior, max_components: int = MAX_COMPONENTS, proposal=None, seed: int = 0,
-                     probit: ProbitTransform | None = None) -> Callable[[float], ParameterDistribution]:
+                     probit: ProbitTransform | None = None,
+                     importance_draws: int = IMPORTANCE_DRAWS) -> Callable[[float], ParameterDistribution]:
     """The posterior given the model's per-trajectory posteriors q(theta | x_i), combined as their product with
     the likelihood ratios raised to a temperature, as a function of the temperature (correction.py's
     tempered_posterior: the product is computed once however many temperatures are asked for)."""
     if probit is None:
-        return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)
+        return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed,
+                                  importance_draws=importance_draws)
     at = tempered_posterior(conditionals, standard_normal_prior(probit.dim), _probit_proposal(proposal, prior),
-                            max_components=max_components, seed=seed)
+                            max_components=max_components, seed=seed, importance_draws=importance_draws)
     return lambda temperature: ProbitPosterior(at(temperature), probit)
 
 

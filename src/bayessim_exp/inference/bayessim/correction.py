@@ -34,8 +34,8 @@ from ...distributions.restricted import Restricted
 
 log = logging.getLogger(__name__)
 
-# importance fallback: base draws, and covariance inflation of the base's defensive half
-_IS_DRAWS = 100_000
+# importance fallback: base draws (method.importance_draws), and covariance inflation of the base's defensive half
+IMPORTANCE_DRAWS = 100_000
 _INFLATE = 4.0
 _MOMENT_DRAWS = 4000
 # mixture components kept in products: the Python API's default (the pipeline's is method.max_components)
@@ -142,7 +142,7 @@ def _temper(mix: GaussianMixture, tau: float) -> GaussianMixture:
 
 
 def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = MAX_COMPONENTS, seed: int = 0,
-              temperature: float = 1.0):
+              temperature: float = 1.0, importance_draws: int = IMPORTANCE_DRAWS):
     """p(theta | x_1..n) from q(theta | x_i) for each real summary (see the module docstring).
 
     conditionals: one q(theta | x_i) per real summary, GaussianMixtures (closed form) or any
@@ -153,13 +153,15 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
         or a TruncatedPrior of it mean no correction; a list gives one proposal per conditional.
     temperature: tau in (0, 1], the power of the likelihood ratios prod_i q_i / p~_i (1: the plain
         product; combination.py chooses it when trajectories disagree).
+    importance_draws: the base draws of the importance-sampled posterior where there is no closed form.
     Returns a distribution with sample(shape) and log_prob(theta).
     """
-    return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed)(temperature)
+    return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed,
+                              importance_draws=importance_draws)(temperature)
 
 
 def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = MAX_COMPONENTS,
-                       seed: int = 0) -> Callable[[float], ParameterDistribution]:
+                       seed: int = 0, importance_draws: int = IMPORTANCE_DRAWS) -> Callable[[float], ParameterDistribution]:
     """`posterior` as a function of the temperature, for callers that need it at several: the product of the
     conditionals, which no temperature changes (the power is applied to it), is computed once, at the first
     call that needs it."""
@@ -220,9 +222,9 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
         inflated = GaussianMixture(base_mix.log_weights, base_mix.means, _INFLATE * base_mix.covs)
         parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
         log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected, tau)
-        result = ImportancePosterior(log_target, DefensiveMixture(parts), num=_IS_DRAWS, seed=seed)
+        result = ImportancePosterior(log_target, DefensiveMixture(parts), num=importance_draws, seed=seed)
         log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample "
-                    "size %.0f", reason, _IS_DRAWS, result.ess)
+                    "size %.0f", reason, importance_draws, result.ess)
         return result
 
     return at

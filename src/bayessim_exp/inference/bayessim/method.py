@@ -56,6 +56,7 @@ class BayesSimConfig:
     combination: str  # several real trajectories: dispersion | product (combination.py)
     replay_tempering: bool  # widen the posterior until the real trajectories lie among its replays
     on_guard: str  # a round the guard flags: warn | fallback | stop (diagnostics/guard.py)
+    importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
 
     def validate(self) -> None:
         if self.parameter_space not in PARAMETER_SPACES:
@@ -67,6 +68,9 @@ class BayesSimConfig:
             raise ConfigError(f"on_guard={self.on_guard!r} not allowed; allowed: {', '.join(ACTIONS)}")
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
+        if self.importance_draws < 1000:
+            raise ConfigError(f"importance_draws must be >= 1000 (the importance-sampled posterior's base draws), "
+                              f"got {self.importance_draws}")
 
 
 class BayesSim(InferenceMethod):
@@ -208,7 +212,8 @@ class BayesSim(InferenceMethod):
             try:
                 post, spread = condition(model, x_real, self.inputs.prior, self.cfg.max_components,
                                          proposal=self.proposal(ctx), seed=ctx.seed, probit=self.probit,
-                                         combination=self.cfg.combination, temperature=product_tau * temperature)
+                                         combination=self.cfg.combination, temperature=product_tau * temperature,
+                                         importance_draws=self.cfg.importance_draws)
             except ValueError as exc:
                 raise PosteriorError(f"round {ctx.round}: {exc}") from exc
             spreads.append(spread)
@@ -260,7 +265,7 @@ class BayesSim(InferenceMethod):
         """The posterior given trajectories' per-trajectory posteriors, combined as the product tempered to the
         temperature it is called with (their product computed once)."""
         return tempered_product(conditionals, self.inputs.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
-                                self.probit)
+                                self.probit, self.cfg.importance_draws)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
         return simulate_as_driven(self.inputs.sims, self.inputs.policy(seed, ctx), theta, self.inputs.rc.collect.horizon,

@@ -15,8 +15,11 @@ H100 machine's 16 cores (2026-11-23) the PPO section's 3 jobs with the methods s
 time, in 144 s (the longest, a PPO seed, 144 s; docs/results.md stamps each); the foreign-dynamics section (59 whole
 runs in its own pool) took 282 s with its fits on the GPU (`--device cuda`) and is estimated at two to three
 times that with CPU fits, its default here; the robots section's 15 Cartpole jobs (BayesSim, then four PPO
-policies each), 2 at a time on the development machine, in 588 s (2026-11-26; 1,111 s of jobs, the longest 78 s). Every methods and PPO job runs on one CPU thread (`sim=native
-device=cpu`), so that a dozen processes do not share the GPU. `--sections` runs sections in separate calls
+policies each), 2 at a time on the development machine, in 588 s (2026-11-26; 1,111 s of jobs, the longest 78 s),
+and in 480 s once the prior's and nominal policies were trained once per seed; the GPU sections' 40 Ant and
+Humanoid jobs, 16 at a time on 4 H100s (4 per GPU), in 1,368 s (2026-11-26; 18,523 s of jobs, the longest 715 s).
+Every methods and PPO job runs on one CPU thread (`sim=native device=cpu`), so that a dozen processes do not share
+the GPU; the GPU sections' jobs run BayesSim so and PPO on their GPU. `--sections` runs sections in separate calls
 where one call's time is short.
 
 SECTIONS below is the order of docs/results.md; each section (benchmarks/results_sections.py) declares its jobs
@@ -59,6 +62,7 @@ from results_sections import (
     ScriptSection,
 )
 
+ROBOTS_ON_GPU = ["--overrides", *CPU_JOB, "--rl-overrides", *GPU_PPO, "rl.train.total_steps=16777216"]
 SECTIONS = [
     MethodsSection(),
     # its own process pool of 12 runs (one thread each; `--device cuda` fits on a GPU where there is one)
@@ -71,11 +75,9 @@ SECTIONS = [
                                                 ["--overrides", *CPU_JOB, "--rl-overrides", *CPU_JOB])}),
     # BayesSim on one CPU thread, PPO on a GPU (MuJoCo Warp) for the budget of Ant's learning curve
     # (docs/benchmarks.md); Ant's jobs start before Humanoid's
-    RobotsSection("rl_on_robots_gpu", {"Ant": ((0, 1, 2), (0, 1, 2, 3, 4), [
-        "--overrides", *CPU_JOB, "--rl-overrides", *GPU_PPO, "rl.train.total_steps=16777216"])},
-        needs_gpu=True, priority=1000.0),
-    RobotsSection("rl_on_robots_humanoid", {"Humanoid": ((0, 1, 2), (0, 1, 2, 3, 4), [
-        "--overrides", *CPU_JOB, "--rl-overrides", *GPU_PPO, "rl.train.total_steps=16777216"])}, needs_gpu=True),
+    RobotsSection("rl_on_robots_gpu", {"Ant": ((0, 1, 2), (0, 1, 2, 3, 4), ROBOTS_ON_GPU)}, needs_gpu=True,
+                  priority=1000.0),
+    RobotsSection("rl_on_robots_humanoid", {"Humanoid": ((0, 1, 2), (0, 1, 2, 3, 4), ROBOTS_ON_GPU)}, needs_gpu=True),
 ]
 BLOCK = re.compile(r"<!-- section (\S+) -->\n(.*?)\n<!-- end \1 -->", re.S)
 

@@ -369,10 +369,12 @@ class RobotsSection:
                 "--run-dir", str(ctx.work / "runs")]
 
     def jobs(self, ctx: Context) -> list[Job]:
+        from rl_on_robots import BASELINES
+
         gpu = self.needs_gpu and not ctx.quick
         # a section's jobs start before those of a section of lower priority, a seed's baselines before its pairs
         return [Job(f"{self.name}/{name}", self._argv(ctx, task, settings, seeds, trained_on, ctx.work / f"{name}.json"),
-                    self.priority + (400 if len(settings) > 1 else 300), gpu=gpu)
+                    self.priority + (400 if trained_on == BASELINES else 300), gpu=gpu)
                 for task, name, settings, seeds, trained_on in self._parts(ctx)]
 
     def render(self, ctx: Context, stamp: str) -> str:

@@ -99,6 +99,8 @@ class Pipeline:
             "summarizer": self.cfg.summarizer.name, "policy": self.cfg.policy.name, "seed": self.rc.seed,
             "run_name": self.rc.run_name, "param_names": names,
             "true_params": None if true is None else dict(zip(names, map(float, true))),
+            # where the truth comes from (real.truth: task, prior, nominal); None for recorded data
+            "truth_source": self.cfg.real.get("truth"),
             "prior": {"low": dict(zip(names, map(float, self.task.spec.low))),
                       "high": dict(zip(names, map(float, self.task.spec.high)))},
             "rounds": [],

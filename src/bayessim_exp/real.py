@@ -31,7 +31,11 @@ from .tasks.base import Task
 log = logging.getLogger(__name__)
 
 
-TRUTHS = ("task", "prior")
+TRUTHS = ("task", "prior", "nominal")
+# real.truth=nominal: a nominal truth is kept this far inside the prior (CDF), where a posterior can score it (a
+# parameter at its box's face, an additive one at the MJCF's 0, has probit coordinate -7.9); moves are x0.5 or x2
+NOMINAL_MARGIN = 0.02
+NOMINAL_MOVES = (0.5, 2.0)
 
 
 class RealSource(Protocol):
@@ -52,7 +56,7 @@ class RealSource(Protocol):
 @dataclasses.dataclass
 class SurrogateConfig:
     per_round: int
-    truth: str  # task: the task's real_params | prior: drawn from the prior with the run's seed
+    truth: str  # task: the task's real_params | prior: drawn from the prior | nominal: the MJCF's, a few moved
 
     def validate(self) -> None:
         if self.per_round < 1:
@@ -69,16 +73,19 @@ class FileConfig:
 class SurrogateReal:
     """A simulated 'real' system whose parameters the inference never sees: the task's real_params, or
     (truth=prior) a draw from the prior seeded by the run's seed, so that a sweep over seeds is a
-    known-truth calibration study (sweeps/calibration.yaml). Driven by the collect policy, or at random
-    where that policy replays the real trajectories (policy=replay)."""
+    known-truth calibration study (sweeps/calibration.yaml), or (truth=nominal) what a real robot most likely
+    is, the MJCF's own values with a few moved per seed (nominal_truth; sweeps/nominal.yaml). Driven by the
+    collect policy, or at random where that policy replays the real trajectories (policy=replay)."""
 
     fingerprint = None  # nothing outside the config to bind to the run dir
 
     def __init__(self, cfg: SurrogateConfig, task: Task, sims: SimulatorPool, prior, seed: int):
         self.cfg, self.task, self.sims = cfg, task, sims
+        generator = torch.Generator().manual_seed(stage_seed(seed, 0, "truth"))
         if cfg.truth == "prior":
-            draw = prior.sample((1,), generator=torch.Generator().manual_seed(stage_seed(seed, 0, "truth")))
-            self.true_params: np.ndarray | None = draw[0].double().numpy()
+            self.true_params: np.ndarray | None = prior.sample((1,), generator=generator)[0].double().numpy()
+        elif cfg.truth == "nominal":
+            self.true_params = nominal_truth(task, prior, seed, generator)
         else:
             self.true_params = task.true_params
 
@@ -95,6 +102,26 @@ class SurrogateReal:
         if traj.diverged.any():
             raise DataError("the surrogate real system diverged; check the task's real_params")
         return traj
+
+
+def nominal_truth(task: Task, prior, seed: int, generator: torch.Generator) -> np.ndarray:
+    """The task's nominal parameters (the MJCF's values: 0 added for additive ones), kept NOMINAL_MARGIN inside
+    the prior's CDF; for seed > 0, 1 to 3 (1 + (seed - 1) % 3) of the parameters with a nonzero nominal value
+    moved by a factor of NOMINAL_MOVES each, chosen with `generator`: the real robots a wide prior over many
+    multipliers makes atypical (docs/statistics.md, 'Real systems in the prior's tail')."""
+    spec = task.spec
+    values = torch.as_tensor(spec.nominal, dtype=torch.float64)
+    movable = [i for i, p in enumerate(spec.params) if p.operation != "additive" and p.nominal != 0]
+    if seed > 0 and movable:
+        count = min(len(movable), 1 + (seed - 1) % 3)
+        chosen = torch.randperm(len(movable), generator=generator)[:count]
+        factors = torch.tensor(NOMINAL_MOVES, dtype=torch.float64)[
+            torch.randint(len(NOMINAL_MOVES), (count,), generator=generator)]
+        for index, factor in zip(chosen.tolist(), factors.tolist()):
+            values[movable[index]] *= factor
+    low, high = torch.as_tensor(spec.low, dtype=torch.float64), torch.as_tensor(spec.high, dtype=torch.float64)
+    cdf = prior.marginal_cdf(values.clamp(low, high)).clamp(NOMINAL_MARGIN, 1 - NOMINAL_MARGIN)
+    return prior.marginal_icdf(cdf).double().numpy()
 
 
 class FileReal:

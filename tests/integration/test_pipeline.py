@@ -237,6 +237,60 @@ def test_a_round_the_guard_fails_hands_on_the_last_one_that_passed(compose, tmp_
     assert not torch.equal(round_1.log_prob(theta), round_2.log_prob(theta))
 
 
+def _outside_in(monkeypatch, failing_round: int, model_failure: bool = False):
+    """The guard finds the real data outside the simulations in one round (with a model failure beside it where
+    asked), and passes the others."""
+    from bayessim_exp.diagnostics import guard
+
+    real_check = guard.check_posterior
+    rounds = iter(range(1, 10))
+    outside = {"flagged": [0], "distance": [100.0], "held_out_median": 10.0, "p_value": [0.001]}
+
+    def check(*args, **kwargs):
+        report = real_check(*args, **kwargs)
+        if next(rounds) != failing_round:
+            return report
+        return real_check(-1.0 if model_failure else 1.0, None, 1000, extrapolation=outside)
+
+    monkeypatch.setattr("bayessim_exp.inference.bayessim.method.check_posterior", check)
+
+
+@pytest.mark.parametrize("escape", ["linear", "nearest", "posterior"])
+def test_a_round_whose_real_data_lie_outside_its_simulations_still_moves_the_next_proposal(compose, tmp_path,
+                                                                                           monkeypatch, escape):
+    """Round 1's real data lie outside its simulations: domain randomization gets the prior, but round 2 proposes
+    from where round 1 points (method.escape), not from the prior again; results.json says which."""
+    _outside_in(monkeypatch, 1)
+    results = Pipeline(compose(GUARDED + ["rounds=2", f"method.escape={escape}"]), tmp_path).run()
+    first, second = results["rounds"]
+    source = "round 1's " + ("posterior" if escape == "posterior" else "linear read of its real data")
+    assert first["guard"]["handed_on"] == "the prior" and first["guard"]["near_real_data_only"]
+    assert first["guard"]["proposes_from"] == source
+    assert (second["proposal"], second["proposal_from"]) == ("truncated", source)
+    run_dir = RunDir(tmp_path)
+    theta = run_dir.load(2, "summarize")["theta"].double()
+    region = run_dir.load(2, "proposal")["proposal"]
+    assert torch.isfinite(region.log_prob(theta)).all()  # round 2 drew from the region
+    if escape == "posterior":
+        torch.testing.assert_close(region.posterior.log_prob(theta), run_dir.load(1, "condition")["posterior"].log_prob(theta))
+    else:  # the region of the read's Gaussian, kept in round 1's guard artifact
+        torch.testing.assert_close(region.posterior.in_probit_space().means[0], run_dir.load(1, "guard")["linear_read"]["mean"])
+
+
+@pytest.mark.parametrize("model_failure", [False, True])
+def test_without_escape_or_with_a_model_failure_the_next_round_proposes_as_this_one_did(compose, tmp_path,
+                                                                                        monkeypatch, model_failure):
+    """method.escape=none, or a model worse than its proposal beside the real data outside: more simulations from
+    what the failing round proposed from (here the prior)."""
+    _outside_in(monkeypatch, 1, model_failure)
+    escape = "linear" if model_failure else "none"
+    results = Pipeline(compose(GUARDED + ["rounds=2", f"method.escape={escape}"]), tmp_path).run()
+    first, second = results["rounds"]
+    assert first["guard"]["near_real_data_only"] is not model_failure
+    assert (first["guard"]["proposes_from"], second["proposal"], second["proposal_from"]) == (
+        "the prior", "prior", "the prior")
+
+
 def test_a_guard_failure_in_round_1_hands_on_the_prior(compose, tmp_path, monkeypatch):
     _failing_in(monkeypatch, 1)
     results = Pipeline(compose(GUARDED + ["rounds=2"]), tmp_path).run()
@@ -288,7 +342,7 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
     simulation (diagnostics/extrapolation.py). Without the replay widening the guard fails every round on it and
     domain randomization gets the prior; with it (Pendulum's default) the replays near the posterior measure the
     difference instead and the distance is recorded, not acted on. A pendulum inside the box passes (the tests of
-    posterior quality above)."""
+    posterior quality above). Round 2 proposes from round 1's linear read of the real data (method.escape)."""
     path = record_pendulum(tmp_path, [0.1, 0.1], n=1, horizon=20)
     results = Pipeline(compose(GUARDED + ["rounds=2", "real=file", f"real.path={path}",
                                           f"method.replay_tempering={replay_tempering}"]), tmp_path / "run").run()
@@ -299,8 +353,8 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
         assert found != replay_tempering, r["guard"]
         if not replay_tempering:
             assert r["guard"]["failed"] and r["guard"]["handed_on"] == "the prior", r["guard"]
-    if not replay_tempering:
-        assert results["rounds"][1]["proposal"] == "prior"
+    if not replay_tempering:  # domain randomization gets the prior, the next round simulates where the data point
+        assert results["rounds"][1]["proposal_from"] == "round 1's linear read of its real data"
 
 
 def test_coverage_near_the_real_data_is_checked_where_asked(compose, tmp_path):

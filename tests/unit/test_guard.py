@@ -10,7 +10,8 @@ from bayessim_exp.diagnostics.guard import MIN_EFFECTIVE_SAMPLES, SAMPLING_Z, ch
 
 def test_a_calibrated_informative_posterior_passes():
     report = check_posterior(2.5, {"0.5": 0.48, "0.9": 0.91}, count=1000)
-    assert report.ok and report.to_dict() == {"ok": True, "failed": False, "warnings": []}
+    assert report.ok and report.to_dict() == {"ok": True, "failed": False, "near_real_data_only": False,
+                                              "warnings": []}
 
 
 def test_worse_than_its_baseline_is_flagged_with_what_to_try():
@@ -69,3 +70,21 @@ def test_an_importance_sampled_posterior_on_few_draws_is_flagged():
 
 def test_nothing_measured_is_nothing_flagged():
     assert check_posterior(None, None, count=0).ok
+
+
+OUTSIDE = {"flagged": [0], "distance": [46.9], "held_out_median": 12.0, "p_value": [0.001]}
+
+
+def test_failures_where_the_real_data_lie_are_told_apart_from_the_models_own():
+    """Real data outside the simulations, or coverage missed near them, with a model calibrated on its own held-out
+    simulations: more simulations there cure it (near_real_data_only); with a model failure beside it, not."""
+    outside = check_posterior(2.0, {"0.9": 0.9}, count=1000, extrapolation=OUTSIDE)
+    assert outside.failed and outside.near_real_data_only
+    near = check_posterior(2.0, {"0.9": 0.9}, count=1000, local={"count": 100, "hpd": {"0.9": 0.5}})
+    assert near.failed and near.near_real_data_only
+    for model_failure in ({"mean_gain": -0.1}, {"coverage": {"0.9": 0.7}}, {"effective_samples": 10.0}):
+        args = {"mean_gain": 2.0, "coverage": {"0.9": 0.9}, **model_failure}
+        both = check_posterior(args["mean_gain"], args["coverage"], count=1000, extrapolation=OUTSIDE,
+                               effective_samples=args.get("effective_samples"))
+        assert both.failed and not both.near_real_data_only, model_failure
+    assert not check_posterior(2.0, {"0.9": 0.99}, count=1000).near_real_data_only  # underconfidence: no failure

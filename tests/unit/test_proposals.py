@@ -6,7 +6,7 @@ import logging
 import pytest
 import torch
 
-from bayessim_exp.distributions.independent import BoxUniform
+from bayessim_exp.distributions.independent import BoxUniform, GaussianPrior
 from bayessim_exp.distributions.mixture import GaussianMixture, TruncatedMixture
 from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
 from bayessim_exp.distributions.truncated_prior import TruncatedPrior
@@ -80,6 +80,37 @@ def test_truncated_restricts_the_prior_and_falls_back_where_the_region_is_too_sm
     with caplog.at_level(logging.WARNING):
         assert TruncatedProposal().build(narrow, ProposalInputs(3, prior, None, 7)) is None
     assert "round 3: " in caplog.text and "simulating from the prior instead" in caplog.text
+
+
+def _narrow_in_thirty_dimensions():
+    """A posterior 1/20 of the prior's width in probit space, in the prior's joint tail (every multiplier of a
+    [0.1, 10] range near 1): its region holds ~1e-40 of the prior. The prior, its transform, and the inner mean."""
+    d = 30
+    prior = BoxUniform(torch.full((d,), 0.1, dtype=torch.float64), torch.full((d,), 10.0, dtype=torch.float64))
+    return prior, ProbitTransform(prior), torch.full((d,), -1.3, dtype=torch.float64)
+
+
+def test_truncated_samples_a_narrow_region_in_thirty_dimensions_never_the_prior(caplog):
+    prior, transform, mean = _narrow_in_thirty_dimensions()
+    narrow = ProbitPosterior(GaussianMixture(torch.zeros(1), mean[None], (0.05**2) * torch.eye(30)[None]), transform)
+    with caplog.at_level(logging.WARNING):
+        proposal = TruncatedProposal().build(narrow, ProposalInputs(3, prior, transform, 7))
+    assert isinstance(proposal, TruncatedPrior) and proposal.posterior is narrow and not caplog.text
+    draws = proposal.sample((5000,), generator=torch.Generator().manual_seed(0))
+    assert torch.isfinite(narrow.log_prob(draws)).all() and (narrow.log_prob(draws) >= proposal.threshold).all()
+    # the region: within 0.39 of the mean (the 99.9 % radius of 30 standard deviations of 0.05); the prior: 5.5
+    assert (transform.to_probit(draws) - mean).norm(dim=1).max() < 0.45
+
+
+def test_truncated_falls_back_to_the_region_of_the_posteriors_moments_where_it_has_no_mixture_form(caplog):
+    prior, transform, mean = _narrow_in_thirty_dimensions()
+    narrow = ProbitPosterior(GaussianPrior(mean, torch.full((30,), 0.05, dtype=torch.float64)), transform)
+    with caplog.at_level(logging.WARNING):
+        proposal = TruncatedProposal().build(narrow, ProposalInputs(3, prior, transform, 7))
+    assert "round 3: " in caplog.text and "the Gaussian with the posterior's moments instead" in caplog.text
+    assert isinstance(proposal, TruncatedPrior) and isinstance(proposal.posterior.inner, GaussianMixture)
+    draws = proposal.sample((2000,), generator=torch.Generator().manual_seed(0))
+    assert (transform.to_probit(draws) - mean).norm(dim=1).max() < 0.45
 
 
 def test_an_unknown_option_lists_the_allowed_ones_registered_plugins_included(monkeypatch):

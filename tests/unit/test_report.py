@@ -131,11 +131,12 @@ def test_a_job_with_a_null_gain_is_counted_and_named_not_averaged_away(tmp_path)
 def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False, outside=False):
     """A known-truth job: one round record per HPD level of the truth; `outside`: its last round's real data lay
     outside the training simulations."""
-    out = results(seed, [gain] * len(levels))
+    out = {**results(seed, [gain] * len(levels)), "truth_source": "prior"}
     for record, level in zip(out["rounds"], levels):
         record["truth"] = {"hpd_level": level, "marginal_rank": dict(zip(["a", "b"], ranks))}
         record["guard"] = {"ok": not guard_failed, "failed": guard_failed, "warnings": [],
-                           "action": "fallback" if guard_failed else "none"}
+                           "action": "fallback" if guard_failed else "none",
+                           "handed_on": "the prior" if guard_failed else "round 2's posterior"}
         record["mismatch"] = {"flagged": flagged}
         record["extrapolation"] = {"flagged": [0] if outside and record is out["rounds"][-1] else []}
     return out
@@ -162,10 +163,11 @@ def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_
     assert float(row["ci_low_0.9"]) == pytest.approx(beta.ppf(0.025, 89, 12), abs=1e-4)
     assert float(row["ci_high_0.9"]) == pytest.approx(beta.ppf(0.975, 90, 11), abs=1e-4)
     assert (row["zero_density"], row["gain_above_zero"], row["guard_failed_final"], row["fallback_final"],
-            row["flagged_final"], row["flagged_any"]) == ("1", "99", "3", "3", "1", "1")
+            row["prior_final"], row["flagged_final"], row["flagged_any"]) == ("1", "99", "3", "3", "3", "1", "1")
     assert (row["outside_rounds"], row["rounds_checked"]) == ("2", "200")
     markdown = (sweep / "report" / "report.md").read_text()
-    assert "100 truths (1 finished jobs without a known truth left out)" in markdown
+    assert "100 truths (drawn from the prior) (1 finished jobs without a known truth left out)" in markdown
+    assert "handed on another distribution (fallback) in 3, the prior in 3" in markdown
     assert "| 1 | 0/100 = 0.00 [0.00, 0.04] | 0/100 = 0.00 [0.00, 0.04] |" in markdown
     assert "90% region 89/100 = 0.89 [0.81, 0.94]" in markdown
     assert "**1 final posterior(s) put zero density at the truth**" in markdown

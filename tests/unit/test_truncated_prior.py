@@ -1,5 +1,7 @@
-"""The truncated proposal against brute force: its region's box holds every point of the region, its
-draws are the prior's draws that fall in the region, and its mass is their share of the prior."""
+"""The truncated proposal against brute force: its draws are the prior's draws that fall in the region and its mass
+is their share of the prior, for posteriors in probit space (relaxed_cover.py), in the box (a box around the region
+holds every point of it) and without a mixture form (the whole prior); in 30 parameters against an exact
+reference."""
 
 import copy
 import math
@@ -10,6 +12,7 @@ import torch
 from bayessim_exp.distributions.independent import BoxUniform, GaussianPrior, LogUniform
 from bayessim_exp.distributions.mixture import GaussianMixture, TruncatedMixture
 from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
+from bayessim_exp.distributions.restricted import Restricted
 from bayessim_exp.distributions.truncated_prior import TruncatedPrior
 
 LOW, HIGH = torch.tensor([0.5, 0.1], dtype=torch.float64), torch.tensor([2.0, 0.9], dtype=torch.float64)
@@ -26,23 +29,16 @@ def _narrow_mixture() -> GaussianMixture:
                            covs)
 
 
-@pytest.mark.parametrize("over_standard_normal", [False, True])
-def test_the_superlevel_box_holds_every_point_of_the_set(over_standard_normal):
+def test_the_superlevel_box_holds_every_point_of_the_set():
     mix = _narrow_mixture()
     grid = torch.stack(torch.meshgrid(*[torch.linspace(-1, 1, 801, dtype=torch.float64)] * 2, indexing="ij"), -1).reshape(-1, 2)
-    value = mix.log_prob(grid) - (torch.distributions.Normal(0.0, 1.0).log_prob(grid).sum(-1) if over_standard_normal else 0)
+    value = mix.log_prob(grid)
     level = float(torch.quantile(value, 0.99))
-    low, high = mix.superlevel_box(level, over_standard_normal)
+    low, high = mix.superlevel_box(level)
     above = grid[value >= level]
     assert ((above >= low) & (above <= high)).all()
     # not the whole grid: the box is informative
     assert ((high - low) < 1.0).all()
-
-
-def test_a_component_wider_than_the_reference_gives_no_box():
-    wide = GaussianMixture(torch.zeros(1), torch.zeros(1, 2), torch.diag(torch.tensor([0.1, 1.5]))[None])
-    assert wide.superlevel_box(-1.0, over_standard_normal=True) is None
-    assert wide.superlevel_box(-1.0) is not None  # over a flat reference every Gaussian is bounded
 
 
 def _posteriors(prior):
@@ -76,15 +72,86 @@ def test_draws_and_mass_match_rejection_from_the_whole_prior(prior_name, space):
     torch.testing.assert_close(lp, prior.log_prob(draws[:100]).double() - math.log(proposal.mass))
 
 
-def test_without_a_box_the_candidates_are_the_whole_prior():
+def _wide_in_one_direction() -> GaussianMixture:
+    """Wider than the prior (N(0, I) in probit space) along the second axis: its region is unbounded there."""
+    return GaussianMixture(torch.zeros(1), torch.tensor([[0.4, 0.0]]), torch.diag(torch.tensor([0.02, 1.5]))[None])
+
+
+@pytest.mark.parametrize("prior_name", PRIORS)
+def test_a_component_wider_than_the_prior_still_gives_exact_draws_and_mass(prior_name):
+    prior = PRIORS[prior_name]
+    proposal = TruncatedPrior(prior, ProbitPosterior(_wide_in_one_direction(), ProbitTransform(prior)), seed=1)
+    reference = prior.sample((1_000_000,), generator=torch.Generator().manual_seed(7)).double()
+    inside = proposal._in_region(reference)
+    assert abs(proposal.mass / inside.double().mean().item() - 1) < 0.05
+    draws = proposal.sample((20_000,), generator=torch.Generator().manual_seed(0))
+    expected = reference[inside]
+    assert ((draws.mean(0) - expected.mean(0)).abs() < 5 * expected.std(0) / math.sqrt(len(draws))).all()
+    assert ((draws.std(0) / expected.std(0) - 1).abs() < 0.03).all()
+
+
+def _uniform_in_ellipsoid(centre, chol_a, radius_sq, n, generator):
+    """n uniform draws in {(u - centre)^T A (u - centre) <= radius_sq}, A = chol_a chol_a^T, and the ellipsoid's
+    log volume."""
+    d = len(centre)
+    z = torch.randn(n, d, dtype=torch.float64, generator=generator)
+    r = torch.rand(n, 1, dtype=torch.float64, generator=generator) ** (1 / d) * math.sqrt(radius_sq)
+    y = z / z.norm(dim=1, keepdim=True) * r
+    log_volume = (0.5 * d * math.log(math.pi) - math.lgamma(d / 2 + 1) + 0.5 * d * math.log(radius_sq)
+                  - torch.log(torch.diagonal(chol_a)).sum())
+    return centre + torch.linalg.solve_triangular(chol_a.T, y.T, upper=True).T, float(log_volume)
+
+
+def test_thirty_parameters_and_a_narrow_posterior_are_sampled_exactly():
+    # a posterior 1/20 of the prior's width in probit space, around a point in the prior's joint tail (every
+    # multiplier of a [0.1, 10] range near 1, ShadowHand's masses): its region holds ~1e-40 of the prior, so
+    # neither the prior nor a box around the region (~1e-13 of it inside) gives candidates; the tilted prior does
+    d = 30
+    prior = BoxUniform(torch.full((d,), 0.1, dtype=torch.float64), torch.full((d,), 10.0, dtype=torch.float64))
+    transform = ProbitTransform(prior)
+    rotation, _ = torch.linalg.qr(torch.randn(d, d, dtype=torch.float64, generator=torch.Generator().manual_seed(0)))
+    cov = rotation @ torch.diag(torch.linspace(0.03, 0.08, d, dtype=torch.float64) ** 2) @ rotation.T
+    mean = torch.full((1, d), -1.3, dtype=torch.float64)
+    proposal = TruncatedPrior(prior, ProbitPosterior(GaussianMixture(torch.zeros(1), mean, cov[None]), transform),
+                              seed=2)
+    assert proposal.acceptance > 0.05
+    draws = proposal.sample((20_000,), generator=torch.Generator().manual_seed(3))
+    assert proposal._in_region(draws).all()
+    # the region in probit space is the ellipsoid (u - c)^T A (u - c) <= r^2, A = P - I (uniform prior): the
+    # reference is uniform draws in it weighted by the prior N(u; 0, I)
+    precision = torch.linalg.inv(cov)
+    a = precision - torch.eye(d, dtype=torch.float64)
+    centre = torch.linalg.solve(a, precision @ mean[0])
+    u = transform.to_probit(draws)
+    radius_sq = float((((u - centre) @ a) * (u - centre)).sum(-1).max())
+    chol_a = torch.linalg.cholesky(a)
+    uniform, log_volume = _uniform_in_ellipsoid(centre, chol_a, radius_sq, 400_000, torch.Generator().manual_seed(4))
+    log_w = -0.5 * (uniform**2).sum(-1) - 0.5 * d * math.log(2 * math.pi)
+    assert abs(proposal.log_mass - (log_volume + float(torch.logsumexp(log_w, 0)) - math.log(len(uniform)))) < 0.05
+    w = torch.softmax(log_w, 0)
+
+    def rim(points):  # squared radius in the metric of A, relative to the rim: uniform draws pile up near 1
+        return (((points - centre) @ a) * (points - centre)).sum(-1) / radius_sq
+
+    for statistic in (rim, lambda points: points @ rotation[:, 0], lambda points: points @ rotation[:, -1]):
+        mean_ref = float((w * statistic(uniform)).sum())
+        sd_ref = float((w * (statistic(uniform) - mean_ref) ** 2).sum().sqrt())
+        assert abs(float(statistic(u).mean()) - mean_ref) < 5 * sd_ref / math.sqrt(len(u))
+
+
+def test_a_posterior_without_a_mixture_form_draws_from_the_whole_prior():
     prior = PRIORS["uniform"]
-    wide = GaussianMixture(torch.zeros(1), torch.zeros(1, 2), torch.diag(torch.tensor([0.3, 1.5]))[None])
-    proposal = TruncatedPrior(prior, ProbitPosterior(wide, ProbitTransform(prior)), hpd_mass=0.9, seed=0)
+    flow_like = Restricted(torch.distributions.MultivariateNormal(torch.tensor([1.0, 0.5], dtype=torch.float64),
+                                                                  0.05 * torch.eye(2, dtype=torch.float64)),
+                           prior.low, prior.high)
+    proposal = TruncatedPrior(prior, flow_like, hpd_mass=0.9, seed=0)
     assert proposal.acceptance == pytest.approx(proposal.mass)
 
 
 def test_a_region_too_small_for_the_candidates_is_refused():
     prior = PRIORS["uniform"]
-    tiny = GaussianMixture(torch.zeros(1), torch.zeros(1, 2), torch.diag(torch.tensor([1e-8, 1.5]))[None])
+    tiny = Restricted(torch.distributions.MultivariateNormal(torch.tensor([1.0, 0.5], dtype=torch.float64),
+                                                             torch.diag(torch.tensor([1e-8, 1e-3], dtype=torch.float64))),
+                      prior.low, prior.high)
     with pytest.raises(ValueError, match="too little to sample"):
-        TruncatedPrior(prior, ProbitPosterior(tiny, ProbitTransform(prior)), seed=0)
+        TruncatedPrior(prior, tiny, seed=0)

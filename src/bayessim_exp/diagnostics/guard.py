@@ -21,7 +21,9 @@ Inputs are what every round measures on its held-out simulations (the last
   calibrated on average.
 Each finding is a sentence saying what is wrong and what to try. Underconfidence is a finding but not a
 failure: a posterior wider than the data allow is still safe to randomize with (the round's action,
-method.on_guard, follows failures only).
+method.on_guard, follows failures only). The last two findings say where the real data lie, not how good the model
+is on its own simulations (`near_real_data_only`): more simulations where the posterior points cure them, so a
+method may still propose from such a posterior while handing on an earlier one.
 """
 
 from __future__ import annotations
@@ -39,13 +41,17 @@ ACTIONS = ("warn", "fallback", "stop")
 class GuardReport:
     warnings: list[str]
     failed: bool = False  # a finding that makes the posterior unsafe to randomize with (all but underconfidence)
+    # every failure says the model was not trained or checked where the real data lie (extrapolation, coverage near
+    # them), none that it is wrong on its own held-out simulations
+    near_real_data_only: bool = False
 
     @property
     def ok(self) -> bool:
         return not self.warnings
 
     def to_dict(self) -> dict:
-        return {"ok": self.ok, "failed": self.failed, "warnings": list(self.warnings)}
+        return {"ok": self.ok, "failed": self.failed, "near_real_data_only": self.near_real_data_only,
+                "warnings": list(self.warnings)}
 
 
 def coverage_band(level: float, count: int, tolerance: float = COVERAGE_TOLERANCE) -> tuple[float, float]:
@@ -62,9 +68,10 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
     or float): fraction} of HPD regions on `count` held-out simulations; effective_samples: of an
     importance-sampled posterior (None: closed form); local: local_coverage's record; extrapolation:
     inputs_outside's record. Any may be None (not measured)."""
-    warnings, failed = [], False
+    # failures on the model's own held-out simulations, and failures where the real data lie
+    warnings, model_failed, near_real = [], False, False
     if mean_gain is not None and not mean_gain > 0:
-        failed = True
+        model_failed = True
         warnings.append(
             f"the posterior is worse than the {baseline} on held-out simulations (mean log-density gain "
             f"{mean_gain:+.2f} nats): do not randomize with it. Try the probit parameter space if box was set "
@@ -74,7 +81,7 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
     for level, value in (coverage or {}).items():
         low, high = coverage_band(float(level), count, tolerance)
         if value < low:
-            failed = True
+            model_failed = True
             warnings.append(
                 f"overconfident: {value:.0%} of held-out true parameters fall in the {float(level):.0%} credible "
                 f"region (passes from {low:.0%}): the posterior is too narrow. Try an ensemble (model.ensemble=3, "
@@ -88,7 +95,7 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
     for level, value in ((local or {}).get("hpd") or {}).items():
         low = coverage_band(float(level), local["count"], tolerance)[0]
         if value < low:
-            failed = True
+            near_real = True
             warnings.append(
                 f"overconfident near the real data: {value:.0%} of parameters drawn from the posterior fall in the "
                 f"{float(level):.0%} credible region once a trajectory simulated at them is added to the real ones "
@@ -96,7 +103,7 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
                 "(drawn from the round's proposal) average away. Try more simulations, an ensemble (model.ensemble=3), "
                 "a summarizer that carries more information, or method.proposal=prior")
     if extrapolation is not None and extrapolation["flagged"]:
-        failed = True
+        near_real = True
         far = extrapolation["flagged"]
         warnings.append(
             f"the real data lie outside the simulations the model was trained on: real trajectories {far} are "
@@ -106,10 +113,10 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
             "of independent ranges (every mass scaled alike) needs a prior that holds it; else try more simulations, "
             "policy=replay with the real actions, or model.project_inputs=false")
     if effective_samples is not None and effective_samples < MIN_EFFECTIVE_SAMPLES:
-        failed = True
+        model_failed = True
         warnings.append(
             f"the posterior given the real data has no closed form and its importance-sampling estimate rests on "
             f"{effective_samples:.0f} effective draws (< {MIN_EFFECTIVE_SAMPLES}): its density and draws are not "
             "reliable. Try method.proposal=truncated, fewer mixture components (model.components) or a model of "
             "one Gaussian per network (mdnn_projected_gaussian_ensemble)")
-    return GuardReport(warnings, failed)
+    return GuardReport(warnings, model_failed or near_real, near_real and not model_failed)

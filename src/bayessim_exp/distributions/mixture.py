@@ -171,33 +171,22 @@ class GaussianMixture(ParameterDistribution):
              + A @ torch.cholesky_solve(other.means[j].unsqueeze(-1), L)).squeeze(-1)
         return GaussianMixture(logits[keep], c, C)
 
-    def superlevel_box(self, level: float, over_standard_normal: bool = False) -> tuple[torch.Tensor, torch.Tensor] | None:
-        """A box (lo, hi) holding every theta where log q(theta) - log r(theta) >= level, with r = N(0, I)
-        when over_standard_normal, else r = 1; None when that set may be unbounded or is empty.
+    def superlevel_box(self, level: float) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """A box (lo, hi) holding every theta where log q(theta) >= level; None where that set is empty.
 
-        Where the K weighted components sum to e^level, one of them reaches e^level / K, so the set lies
-        in the union of one ellipsoid per component: (theta - m)^T A (theta - m) <= r^2 with A = P - I
-        (over N(0, I)) or P, P the component's precision; bounded where A is positive definite. The box
-        spans each ellipsoid's extent along the axes, m +- r sqrt(diag A^-1).
+        Where the K weighted components sum to e^level, one of them reaches e^level / K, so the set lies in the
+        union of one ellipsoid per component, (theta - m)^T P (theta - m) <= r^2 with P the component's precision.
+        The box spans each ellipsoid's extent along the axes, m +- r sqrt(diag P^-1).
         """
-        d, s = self.dim, 1.0 if over_standard_normal else 0.0
-        precision = torch.cholesky_inverse(self.scale_tril)
-        A = precision - s * torch.eye(d, dtype=torch.float64)
-        chol_a, info = torch.linalg.cholesky_ex(A)
-        if info.any():
-            return None
-        b = (precision @ self.means.unsqueeze(-1)).squeeze(-1)
-        m = torch.cholesky_solve(b.unsqueeze(-1), chol_a).squeeze(-1)
         half_logdet_cov = torch.log(torch.diagonal(self.scale_tril, dim1=-2, dim2=-1)).sum(-1)
-        # g_k = log w_k + log N(theta; mu_k, C_k) - log r(theta) = const_k - (theta - m)^T A (theta - m) / 2
-        const = (self.log_weights - half_logdet_cov - (1 - s) * 0.5 * d * _LOG_2PI
-                 + 0.5 * ((b * m).sum(-1) - (b * self.means).sum(-1)))
+        # log w_k + log N(theta; m_k, C_k) = const_k - (theta - m_k)^T P_k (theta - m_k) / 2
+        const = self.log_weights - half_logdet_cov - 0.5 * self.dim * _LOG_2PI
         radius_sq = 2 * (const - level + math.log(self.num_components))
         reached = radius_sq >= 0
         if not reached.any():
             return None
-        extent = (radius_sq[:, None].clamp_min(0) * torch.diagonal(torch.cholesky_inverse(chol_a), dim1=-2, dim2=-1)).sqrt()
-        return (m - extent)[reached].min(0).values, (m + extent)[reached].max(0).values
+        extent = (radius_sq[:, None].clamp_min(0) * torch.diagonal(self.covs, dim1=-2, dim2=-1)).sqrt()
+        return (self.means - extent)[reached].min(0).values, (self.means + extent)[reached].max(0).values
 
     def prune(self, max_components: int) -> GaussianMixture:
         """Keep the heaviest components (renormalised)."""

@@ -24,7 +24,6 @@ from ..data_files import data_class
 from .base import ParameterDistribution
 from .box import restrict_log_prob
 from .independent import GaussianPrior, std_normal_log_pdf
-from .mixture import GaussianMixture
 
 # CDF values are kept this far from 0 and 1, so u stays finite (|u| <= 7.9) at the box's faces
 _EDGE = 1e-15
@@ -99,14 +98,6 @@ class ProbitPosterior(ParameterDistribution):
 
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
         return self.transform.from_probit(self.inner.sample(shape, generator=generator))
-
-    def superlevel_box(self, level: float) -> tuple[torch.Tensor, torch.Tensor] | None:
-        """Where the inner distribution is a Gaussian mixture: log_prob = log q_u(u) - log N(u; 0, I) +
-        log prior(theta), at most that with the prior's peak; the probit box maps back coordinate-wise."""
-        if not isinstance(self.inner, GaussianMixture):
-            return None
-        box = self.inner.superlevel_box(level - self.transform.log_prior_peak(), over_standard_normal=True)
-        return None if box is None else tuple(self.transform.from_probit(bound) for bound in box)
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         theta = theta.double()

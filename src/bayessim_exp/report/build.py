@@ -120,8 +120,9 @@ def build_report(sweep_dir: str | Path, out_dir: str | Path | None = None, poste
     if studies:
         lines += ["", "## Calibration (known truths)", "",
                   "Where each job's truth lies in its final posterior (sweeps/calibration.yaml draws the truths from "
-                  "the prior): a calibrated pipeline holds about L of them in its level-L regions, and its SBC rank "
-                  "histograms are flat within the grey band.", ""]
+                  "the prior, sweeps/nominal.yaml puts them at the MJCF's values with a few moved): a calibrated "
+                  "pipeline holds about L of them in its level-L regions, and over truths drawn from the prior its SBC "
+                  "rank histograms are flat within the grey band.", ""]
         for config, study in studies.items():
             lines += calibration_section.markdown(config, study, rank_figures[config])
     (out / "report.md").write_text("\n".join(lines) + "\n")

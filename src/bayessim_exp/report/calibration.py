@@ -1,12 +1,14 @@
 """The report's calibration section: where the truth lies in the final posterior, over the jobs of a
-known-truth study (sweeps/calibration.yaml: each seed's surrogate parameters drawn from the prior).
+known-truth study (sweeps/calibration.yaml: each seed's surrogate parameters drawn from the prior;
+sweeps/nominal.yaml: the MJCF's values, a few moved, what real robots look like; results.json's `truth_source`).
 
 Read from each round record's `truth` (diagnostics/scoring.py): `hpd_level`, the share of posterior draws
 denser than the truth (inside the level-L region iff below L; null, zero density, counts as outside), and
 `marginal_rank` per parameter (an SBC rank over the number of draws: uniform over truths drawn from the
 prior when the pipeline is calibrated). Per configuration: the share of truths inside the 50 % and 90 %
 regions with a Clopper-Pearson 95 % interval, per round; the gain at the truth (quartiles, share above zero,
-count of zero densities); how often the guard failed or handed on another distribution and how often the
+count of zero densities); how often the guard failed or handed on another distribution (the prior among them) and
+how often the
 mismatch flag fired, in the final round and in any round; in how many rounds the real data lay outside the
 training simulations (diagnostics/extrapolation.py: with truths from the prior, its false alarms); and one PNG of SBC rank histograms per parameter
 of the final round, each with the binomial 99 % band of a uniform histogram.
@@ -27,6 +29,8 @@ LEVELS = (0.5, 0.9)
 BINS = 10
 MAX_PARAMETERS = 16  # histograms drawn per configuration; the others are counted in the figure's title
 CONFIDENCE = 0.95
+_SOURCES = {"prior": "drawn from the prior", "nominal": "nominal: the MJCF's values, a few moved",
+            "task": "the task's real_params", "None": "recorded with the data"}
 
 
 @dataclasses.dataclass
@@ -38,6 +42,8 @@ class Calibration:
     guard_failed_final: int
     guard_failed_any: int
     handed_on_other: int  # final rounds whose guard handed on another distribution (fallback)
+    handed_on_prior: int  # final rounds that handed on the prior: domain randomization gains nothing
+    sources: list[str]  # where the jobs' truths came from (real.truth), as results.json says
     flagged_final: int
     flagged_any: int
     outside_rounds: tuple[int, int]  # rounds whose real data lay outside the training simulations, rounds checked
@@ -85,6 +91,8 @@ def calibration(jobs: list[Job]) -> Calibration | None:
         guard_failed_final=sum(guard_failed(f) for f in finals),
         guard_failed_any=sum(any(guard_failed(r) for r in j.results["rounds"]) for j in known),
         handed_on_other=sum((f.get("guard") or {}).get("action") == "fallback" for f in finals),
+        handed_on_prior=sum((f.get("guard") or {}).get("handed_on") == "the prior" for f in finals),
+        sources=sorted({str(j.results.get("truth_source")) for j in known}),
         flagged_final=sum(flagged(f) for f in finals),
         flagged_any=sum(any(flagged(r) for r in j.results["rounds"]) for j in known),
         outside_rounds=(sum(bool(e["flagged"]) for e in checked), len(checked)), ranks=ranks)
@@ -102,7 +110,8 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
     quartiles = np.percentile(gains, [25, 50, 75]) if gains else [math.nan] * 3
     final = {level: c.inside[level][-1] for level in LEVELS}
     lines = [f"### `{config}`", "",
-             f"{c.jobs} truths" + (f" ({c.left_out} finished jobs without a known truth left out)" if c.left_out else "")
+             f"{c.jobs} truths ({', '.join(_SOURCES.get(s, s) for s in c.sources)})"
+             + (f" ({c.left_out} finished jobs without a known truth left out)" if c.left_out else "")
              + ". Share of truths inside the final posterior's highest-density regions (Clopper-Pearson "
              f"{CONFIDENCE:.0%} interval): " + "; ".join(f"{level:.0%} region {share_text(*final[level])}"
                                                            for level in LEVELS) + ".", "",
@@ -115,7 +124,8 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
               f"{quartiles[2]:+.2f} nats; above zero for {sum(g > 0 for g in gains)} of {len(c.gains)}"
               + (f"; **{zero} final posterior(s) put zero density at the truth**" if zero else "") + ".",
               f"Guard failed: final round {c.guard_failed_final} of {c.jobs}, any round {c.guard_failed_any}; "
-              f"the final round handed on another distribution (fallback) in {c.handed_on_other}. "
+              f"the final round handed on another distribution (fallback) in {c.handed_on_other}, the prior in "
+              f"{c.handed_on_prior}. "
               f"Mismatch flagged: final round {c.flagged_final} of {c.jobs}, any round {c.flagged_any}. "
               "Real data outside the training simulations (a guard failure): "
               + (f"{share_text(*c.outside_rounds)} of the rounds checked." if c.outside_rounds[1] else "not checked.")]
@@ -131,13 +141,13 @@ def csv_row(config: str, c: Calibration) -> list:
         row += [k, n, f"{k / n:.4f}", *(f"{v:.4f}" for v in clopper_pearson(k, n))]
     gains = [g for g in c.gains if g is not None and math.isfinite(g)]
     row += [sum(g > 0 for g in gains), len(c.gains) - len(gains), c.guard_failed_final, c.guard_failed_any,
-            c.handed_on_other, c.flagged_final, c.flagged_any, *c.outside_rounds]
+            c.handed_on_other, c.handed_on_prior, c.flagged_final, c.flagged_any, *c.outside_rounds]
     return row
 
 
 CSV_HEADER = ["configuration", "truths",
               *(f"{name}_{level:g}" for level in LEVELS for name in ("inside", "rounds_of", "share", "ci_low", "ci_high")),
-              "gain_above_zero", "zero_density", "guard_failed_final", "guard_failed_any", "fallback_final",
+              "gain_above_zero", "zero_density", "guard_failed_final", "guard_failed_any", "fallback_final", "prior_final",
               "flagged_final", "flagged_any", "outside_rounds", "rounds_checked"]
 
 

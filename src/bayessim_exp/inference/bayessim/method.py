@@ -26,7 +26,8 @@ from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
 from ...diagnostics.replayed_check import replayed_check
 from ...distributions.base import ParameterDistribution
-from ...distributions.probit import standard_normal_prior
+from ...distributions.mixture import GaussianMixture, TruncatedMixture
+from ...distributions.probit import ProbitPosterior, standard_normal_prior
 from ...errors import ConfigError, PosteriorError
 from ...models.base import column_scale
 from ...sim.trajectories import Trajectories
@@ -34,7 +35,8 @@ from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, MethodInputs, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition, tempered_product
-from .handed_on import handed_on, handed_on_round
+from .escape import ESCAPES, linear_read_at
+from .handed_on import ProposalSource, handed_on, handed_on_round, posterior_of, proposal_source
 from .identifiability_checks import log_findings, nominal_point, summaries_at
 from .model_checks import coverage_near_real, extrapolation
 from .parameter_space import PARAMETER_SPACES, probit_transform
@@ -56,6 +58,7 @@ class BayesSimConfig:
     combination: str  # several real trajectories: dispersion | product (combination.py)
     replay_tempering: bool  # widen the posterior until the real trajectories lie among its replays
     on_guard: str  # a round the guard flags: warn | fallback | stop (diagnostics/guard.py)
+    escape: str  # where a round whose real data lie outside its simulations proposes the next: linear | posterior | none
     importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
 
     def validate(self) -> None:
@@ -64,6 +67,8 @@ class BayesSimConfig:
         proposal_named(self.proposal)
         if self.combination not in COMBINATIONS:
             raise ConfigError(f"combination={self.combination!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
+        if self.escape not in ESCAPES:
+            raise ConfigError(f"escape={self.escape!r} not allowed; allowed: {', '.join(ESCAPES)}")
         if self.on_guard not in ACTIONS:
             raise ConfigError(f"on_guard={self.on_guard!r} not allowed; allowed: {', '.join(ACTIONS)}")
         if self.max_components < 1:
@@ -93,13 +98,17 @@ class BayesSim(InferenceMethod):
 
     # stages --------------------------------------------------------------------------
     def propose(self, ctx: RoundContext) -> dict:
-        """Round r's proposal, built from what round r - 1 handed on (proposals.py): its name as results.json
-        records it ('prior' where the round falls back to the prior) and the distribution, None for the prior."""
+        """Round r's proposal, built from the posterior round r - 1's guard chose for it (proposals.py): its name as
+        results.json records it ('prior' where the round simulates from the prior), the distribution (None for the
+        prior) and the round whose posterior it was built from (0: the prior)."""
         r, proposal = ctx.round, None
+        source = proposal_source(ctx, r - 1)
         if r > 1:
-            proposal = self.proposer.build(handed_on(ctx, self.inputs.prior, r - 1),
-                                           ProposalInputs(r, self.inputs.prior, self.probit, ctx.seed))
-        return {"name": "prior" if proposal is None else self.proposer.name, "proposal": proposal}
+            origin = (self._linear_read_distribution(ctx.output("guard", source.round)["linear_read"]) if source.linear
+                      else posterior_of(ctx, self.inputs.prior, source.round))
+            proposal = self.proposer.build(origin, ProposalInputs(r, self.inputs.prior, self.probit, ctx.seed))
+        return {"name": "prior" if proposal is None else self.proposer.name, "proposal": proposal,
+                "source": source.round, "source_linear": source.linear}
 
     def proposal(self, ctx: RoundContext) -> ParameterDistribution:
         """The proposal stage's distribution; the prior where it has none."""
@@ -329,9 +338,12 @@ class BayesSim(InferenceMethod):
             x_real, posterior, self.inputs.prior, num, ctx.seed)
 
     def guard(self, ctx: RoundContext) -> dict:
-        """The guard's findings (diagnostics/guard.py) and what the round hands on to domain randomization
-        and the next proposal: its own posterior, or with on_guard=fallback and a finding the distribution
-        the previous round handed on (the prior before round 1)."""
+        """The guard's findings (diagnostics/guard.py), what the round hands on to domain randomization and what
+        the next round proposes from. A round that passes: its own posterior, for both. With on_guard=fallback and a
+        failure, domain randomization gets what the previous round handed on (the prior before round 1); the next
+        round proposes from this round's posterior where every failure says only that the real data lie outside
+        the simulations (method.escape: simulating where it points is what cures that), else from what this round
+        proposed from (more simulations from the same proposal)."""
         r, held_out, checked = ctx.round, ctx.output("fit")["held_out"] or {}, ctx.output("model_check")
         conditioned = ctx.output("condition")
         baseline = "prior" if self._proposal_name(ctx) == "prior" else f"round's proposal ({self._proposal_name(ctx)})"
@@ -343,13 +355,40 @@ class BayesSim(InferenceMethod):
                                  local=checked.get("local_coverage"),
                                  extrapolation=None if widened_by_replays else checked.get("extrapolation"))
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
-        source = handed_on_round(ctx, r - 1) if action == "fallback" else r
+        source, proposes, linear_read = r, ProposalSource(r), None
+        if action == "fallback":
+            source = handed_on_round(ctx, r - 1)
+            if self.cfg.escape == "none" or not report.near_real_data_only:  # the model failed: simulate more alike
+                proposes = ProposalSource(ctx.output("proposal")["source"], ctx.output("proposal")["source_linear"])
+            elif self.cfg.escape in ("linear", "nearest"):
+                linear_read = self._linear_read(ctx)
+                proposes = ProposalSource(r, linear=True)
         for warning in report.warnings:
             log.warning("round %d: %s", r, warning)
         if action == "fallback":
-            log.warning("round %d: the guard failed; domain randomization and the next proposal get %s instead "
-                        "(method.on_guard=fallback)", r, _round_name(source))
-        return {**report.to_dict(), "action": action, "handed_on": source}
+            why = (f"its real data lie outside its simulations: method.escape={self.cfg.escape}"
+                   if proposes.round == r else "as this round did")
+            log.warning("round %d: the guard failed; domain randomization gets %s instead (method.on_guard=fallback); "
+                        "the next round proposes from %s (%s)", r, _round_name(source), proposes.describe(), why)
+        return {**report.to_dict(), "action": action, "handed_on": source, "proposes_from": proposes.round,
+                "proposes_linear": proposes.linear, "linear_read": linear_read}
+
+    def _linear_read(self, ctx: RoundContext) -> dict:
+        """escape.linear_read_at on the rounds the model is trained on: their training rows fitted, the round's
+        held-out rows checked, read at the real summaries, in the model's coordinates."""
+        data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
+        mean, cov = linear_read_at(torch.cat([d[1] for d in data]), self._fitted_space(torch.cat([d[0] for d in data])),
+                                   data[-1][3], self._fitted_space(data[-1][2]),
+                                   ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]),
+                                   nearest=self.cfg.escape == "nearest")
+        return {"mean": mean, "cov": cov}
+
+    def _linear_read_distribution(self, read: dict) -> ParameterDistribution:
+        """The Gaussian of a linear read, in parameter units: mapped back from probit space, or truncated to the box."""
+        gaussian = GaussianMixture(torch.zeros(1), read["mean"][None], read["cov"][None])
+        if self.probit is not None:
+            return ProbitPosterior(gaussian, self.probit)
+        return TruncatedMixture(gaussian, self.inputs.prior.low, self.inputs.prior.high)
 
     # results -------------------------------------------------------------------------
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
@@ -373,11 +412,14 @@ class BayesSim(InferenceMethod):
             "val_loss": hist["best_val"],
             "joint_spread": hist.get("joint_spread"),  # the common factor on the spread (models/spread.py)
             "proposal": self._proposal_name(ctx),
+            "proposal_from": ProposalSource(ctx.output("proposal")["source"],
+                                            ctx.output("proposal")["source_linear"]).describe(),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],
             "identifiability": {k: v for k, v in ctx.output("identifiability").items() if k != "seconds"},
-            "guard": {**{k: guard[k] for k in ("ok", "failed", "warnings", "action")},
-                      "handed_on": _round_name(guard["handed_on"])},
+            "guard": {**{k: guard[k] for k in ("ok", "failed", "near_real_data_only", "warnings", "action")},
+                      "handed_on": _round_name(guard["handed_on"]),
+                      "proposes_from": ProposalSource(guard["proposes_from"], guard["proposes_linear"]).describe()},
             "dispersion": conditioned["dispersion"],
             "temperature": conditioned["temperature"],
             "product_temperature": conditioned["product_temperature"],

@@ -102,13 +102,21 @@ class GaussianProposal(Proposal):
 
 @register_proposal
 class TruncatedProposal(Proposal):
-    """The prior where the region is too small a share of it to sample (many parameters)."""
+    """Where the posterior has no mixture form and its region is too small a share of the prior to sample (many
+    parameters: the candidates are the whole prior, truncated_prior.py), the region of the Gaussian with its
+    moments, in probit space where the model is fitted there (sampled in any number of parameters); the prior only
+    where that fails too."""
 
     name = "truncated"
 
     def from_posterior(self, posterior: ParameterDistribution, inputs: ProposalInputs) -> ParameterDistribution | None:
         try:
             return TruncatedPrior(inputs.prior, posterior, seed=inputs.seed)
+        except ValueError as exc:
+            log.warning("round %d: %s; truncating to the region of the Gaussian with the posterior's moments instead",
+                        inputs.round, exc)
+        try:
+            return TruncatedPrior(inputs.prior, GaussianProposal().from_posterior(posterior, inputs), seed=inputs.seed)
         except ValueError as exc:
             log.warning("round %d: %s; simulating from the prior instead", inputs.round, exc)
             return None

@@ -1,0 +1,66 @@
+"""What every round of a sweep's runs proposed from, what its guard did and the gain at the truth: the table of
+docs/benchmarks.md's "Rounds that escape and focus" (benchmarks/device/real_robot_studies.sh collects it).
+
+    python benchmarks/real_robot_rounds.py multirun/nominal/<date> [more sweep dirs]
+
+Per sweep: one row per job (seed), per round `proposal source -> guard action (gain)`, where the source is the
+prior, a round's posterior or a round's linear read of its real data (method.escape) and `pass` / `fallback`
+is the guard's verdict; then the final gain at the truth and whether the run meets issue 44's acceptance: some
+round passed the guard, and no round after the first simulated from the prior.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from pathlib import Path
+
+from bayessim_exp.report.jobs import read_jobs
+
+_SHORT = {"the prior": "prior", "linear read of its real data": "read", "posterior": "post"}
+
+
+def _source(text: str) -> str:
+    """'round 2's linear read of its real data' -> 'r2 read'."""
+    if text == "the prior":
+        return "prior"
+    number, _, what = text.removeprefix("round ").partition("'s ")
+    return f"r{number} {_SHORT.get(what, what)}"
+
+
+def rows(sweep: Path) -> list[str]:
+    jobs = [j for j in read_jobs(sweep) if j.results and j.results["rounds"]]
+    out = [f"### {sweep.name} ({len(jobs)} runs with a round)", "",
+           "| seed | rounds: proposal from -> guard (gain at the truth) | final gain | a round passed | "
+           "from the prior after round 1 |", "|---|---|---|---|---|"]
+    finals = []
+    for job in jobs:
+        rounds = job.results["rounds"]
+        cells = []
+        for r in rounds:
+            verdict = "pass" if r["guard"]["action"] in ("none", "warn") else r["guard"]["action"]
+            gain = r.get("log_prob_gain")
+            cells.append(f"{_source(r.get('proposal_from', '?'))} -> {verdict} "
+                         f"({'n/a' if gain is None else f'{gain:+.1f}'})")
+        final = rounds[-1].get("log_prob_gain")
+        finals.append(final)
+        passed = any(r["guard"]["action"] in ("none", "warn") for r in rounds)
+        from_prior = sum(r["proposal"] == "prior" for r in rounds[1:])
+        status = "" if job.status == "finished" else f" ({job.status})"
+        out.append(f"| {job.seed}{status} | {'; '.join(cells)} | "
+                   f"{'n/a' if final is None else f'{final:+.2f}'} | {'yes' if passed else 'no'} | {from_prior} |")
+    known = [g for g in finals if g is not None]
+    if known:
+        out += ["", f"Final gain: median {statistics.median(known):+.2f}, min {min(known):+.2f} nats over {len(known)} runs."]
+    return out + [""]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("sweeps", nargs="+", type=Path)
+    for sweep in parser.parse_args().sweeps:
+        print("\n".join(rows(sweep)))
+
+
+if __name__ == "__main__":
+    main()

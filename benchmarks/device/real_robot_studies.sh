@@ -27,7 +27,7 @@ mkdir -p "$OUT"
 
 if [ "${1:-}" = collect ]; then
     for log in "$WORK"/*.log; do [ -f "$log" ] && { echo "== ${log##*/}"; tail -n 3 "$log"; }; done
-    "$PY" benchmarks/real_robot_rounds.py "$WORK"/*/ | tee "$OUT/real_robot_rounds.md"
+    PYTHONPATH=/tmp/site:$PWD/src "$PY" benchmarks/real_robot_rounds.py "$WORK"/*/ | tee "$OUT/real_robot_rounds.md"
     (cd /tmp && tar -czf "$OUT/real_robot_studies.tar.gz" real_robot_studies/*.log real_robot_studies/*/*/results.json \
         real_robot_studies/*/*/.hydra/overrides.yaml real_robot_studies/*/*/error.txt 2>/dev/null)
     exit 0
@@ -40,7 +40,7 @@ THREADS=${THREADS:-2}
 sweep() {  # sweep NAME ARGS...: a --multirun into $WORK/NAME, fitting on the next GPU
     local name=$1
     shift
-    CUDA_VISIBLE_DEVICES=$gpu "$PY" -m bayessim_exp "$@" --multirun hydra/launcher=local "hydra.sweep.dir=$WORK/$name" \
+    CUDA_VISIBLE_DEVICES=$gpu "$PY" -m bayessim_exp --multirun "$@" hydra/launcher=local "hydra.sweep.dir=$WORK/$name" \
         logging.progress=false >"$WORK/$name.log" 2>&1 &
     gpu=$(((gpu + 1) % gpus))
 }

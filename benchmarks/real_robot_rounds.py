@@ -4,7 +4,8 @@ docs/benchmarks.md's "Rounds that escape and focus" (benchmarks/device/real_robo
     python benchmarks/real_robot_rounds.py multirun/nominal/<date> [more sweep dirs]
 
 Per sweep: one row per job (seed), per round `proposal source -> guard action (gain)`, where the source is the
-prior, a round's posterior or a round's linear read of its real data (method.escape) and `pass` / `fallback`
+prior, a round's posterior, or what a round read off its real data (method.escape: its linear read, or the
+simulations nearest them) and `pass` / `fallback`
 is the guard's verdict; then the final gain at the truth and whether the run meets issue 44's acceptance: some
 round passed the guard, and no round after the first simulated from the prior.
 """
@@ -17,7 +18,8 @@ from pathlib import Path
 
 from bayessim_exp.report.jobs import read_jobs
 
-_SHORT = {"the prior": "prior", "linear read of its real data": "read", "posterior": "post"}
+_SHORT = {"the prior": "prior", "linear read of its real data": "read", "simulations nearest its real data": "near",
+          "posterior": "post"}
 
 
 def _source(text: str) -> str:

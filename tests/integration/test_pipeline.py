@@ -263,7 +263,8 @@ def test_a_round_whose_real_data_lie_outside_its_simulations_still_moves_the_nex
     _outside_in(monkeypatch, 1)
     results = Pipeline(compose(GUARDED + ["rounds=2", f"method.escape={escape}"]), tmp_path).run()
     first, second = results["rounds"]
-    source = "round 1's " + ("posterior" if escape == "posterior" else "linear read of its real data")
+    source = "round 1's " + {"posterior": "posterior", "linear": "linear read of its real data",
+                             "nearest": "simulations nearest its real data"}[escape]
     assert first["guard"]["handed_on"] == "the prior" and first["guard"]["near_real_data_only"]
     assert first["guard"]["proposes_from"] == source
     assert (second["proposal"], second["proposal_from"]) == ("truncated", source)
@@ -274,7 +275,7 @@ def test_a_round_whose_real_data_lie_outside_its_simulations_still_moves_the_nex
     if escape == "posterior":
         torch.testing.assert_close(region.posterior.log_prob(theta), run_dir.load(1, "condition")["posterior"].log_prob(theta))
     else:  # the region of the read's Gaussian, kept in round 1's guard artifact
-        torch.testing.assert_close(region.posterior.in_probit_space().means[0], run_dir.load(1, "guard")["linear_read"]["mean"])
+        torch.testing.assert_close(region.posterior.in_probit_space().means[0], run_dir.load(1, "guard")["read"]["mean"])
 
 
 @pytest.mark.parametrize("model_failure", [False, True])
@@ -283,7 +284,7 @@ def test_without_escape_or_with_a_model_failure_the_next_round_proposes_as_this_
     """method.escape=none, or a model worse than its proposal beside the real data outside: more simulations from
     what the failing round proposed from (here the prior)."""
     _outside_in(monkeypatch, 1, model_failure)
-    escape = "linear" if model_failure else "none"
+    escape = "nearest" if model_failure else "none"
     results = Pipeline(compose(GUARDED + ["rounds=2", f"method.escape={escape}"]), tmp_path).run()
     first, second = results["rounds"]
     assert first["guard"]["near_real_data_only"] is not model_failure
@@ -342,7 +343,7 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
     simulation (diagnostics/extrapolation.py). Without the replay widening the guard fails every round on it and
     domain randomization gets the prior; with it (Pendulum's default) the replays near the posterior measure the
     difference instead and the distance is recorded, not acted on. A pendulum inside the box passes (the tests of
-    posterior quality above). Round 2 proposes from round 1's linear read of the real data (method.escape)."""
+    posterior quality above). Round 2 proposes around round 1's simulations nearest the real data (method.escape)."""
     path = record_pendulum(tmp_path, [0.1, 0.1], n=1, horizon=20)
     results = Pipeline(compose(GUARDED + ["rounds=2", "real=file", f"real.path={path}",
                                           f"method.replay_tempering={replay_tempering}"]), tmp_path / "run").run()
@@ -354,7 +355,7 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
         if not replay_tempering:
             assert r["guard"]["failed"] and r["guard"]["handed_on"] == "the prior", r["guard"]
     if not replay_tempering:  # domain randomization gets the prior, the next round simulates where the data point
-        assert results["rounds"][1]["proposal_from"] == "round 1's linear read of its real data"
+        assert results["rounds"][1]["proposal_from"] == "round 1's simulations nearest its real data"
 
 
 def test_coverage_near_the_real_data_is_checked_where_asked(compose, tmp_path):

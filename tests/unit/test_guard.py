@@ -20,8 +20,12 @@ def test_worse_than_its_baseline_is_flagged_with_what_to_try():
     assert "worse than the round's proposal (truncated)" in report.warnings[0] and "probit" in report.warnings[0]
 
 
-def test_zero_gain_is_flagged():
-    assert not check_posterior(0.0, None, count=1000).ok
+def test_zero_and_non_finite_gains_are_flagged():
+    """An infinite gain over the proposal means held-out parameters where the proposal has no density; NaN, an
+    infinite difference of two."""
+    for gain in (0.0, math.inf, math.nan):
+        report = check_posterior(gain, None, count=1000)
+        assert report.failed and not report.near_real_data_only, gain
 
 
 @pytest.mark.parametrize("count", [100, 1000, 10_000])

@@ -116,7 +116,7 @@ def test_thirty_parameters_and_a_narrow_posterior_are_sampled_exactly():
                               seed=2)
     assert proposal.acceptance > 0.05
     draws = proposal.sample((20_000,), generator=torch.Generator().manual_seed(3))
-    assert proposal._in_region(draws).all()
+    assert proposal._in_region(draws.float().double()).all()  # as the pipeline stores them: the proposal holds them
     # the region in probit space is the ellipsoid (u - c)^T A (u - c) <= r^2, A = P - I (uniform prior): the
     # reference is uniform draws in it weighted by the prior N(u; 0, I)
     precision = torch.linalg.inv(cov)
@@ -155,3 +155,14 @@ def test_a_region_too_small_for_the_candidates_is_refused():
                       prior.low, prior.high)
     with pytest.raises(ValueError, match="too little to sample"):
         TruncatedPrior(prior, tiny, seed=0)
+
+
+def test_draws_stay_in_the_region_once_stored_in_float32():
+    """A region reaching the box's face (a read of the real data beyond the prior's range, method.escape=linear):
+    parameters within 1e-8 of the face round to it in float32, where the pipeline stores them, and their probit
+    coordinate jumps; the proposal must still hold every stored draw, or its density there is zero."""
+    prior = PRIORS["uniform"]
+    at_face = GaussianMixture(torch.zeros(1), torch.tensor([[-7.0, 0.0]]), torch.diag(torch.tensor([0.25, 0.04]))[None])
+    proposal = TruncatedPrior(prior, ProbitPosterior(at_face, ProbitTransform(prior)), seed=0)
+    stored = proposal.sample((20_000,), generator=torch.Generator().manual_seed(1)).float().double()
+    assert torch.isfinite(proposal.log_prob(stored)).all()

@@ -70,7 +70,7 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
     inputs_outside's record. Any may be None (not measured)."""
     # failures on the model's own held-out simulations, and failures where the real data lie
     warnings, model_failed, near_real = [], False, False
-    if mean_gain is not None and not mean_gain > 0:
+    if mean_gain is not None and not (math.isfinite(mean_gain) and mean_gain > 0):  # infinite: a density of zero
         model_failed = True
         warnings.append(
             f"the posterior is worse than the {baseline} on held-out simulations (mean log-density gain "

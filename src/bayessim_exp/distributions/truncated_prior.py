@@ -88,8 +88,13 @@ class TruncatedPrior(ParameterDistribution):
         return self.prior.dim
 
     def sample(self, shape: tuple[int, ...] = (1,), generator: torch.Generator | None = None) -> torch.Tensor:
+        """Draws whose float32 roundings lie in the region too: the pipeline stores simulated parameters in float32,
+        and in many dimensions most of the region's prior mass lies at its rim, where rounding moved 4 % of
+        Cartpole's and FrankaCabinet's draws out of it (their proposal density zero, the held-out gain over the
+        proposal not a number)."""
         n = math.prod(shape)
-        draws = sample_by_rejection(lambda b: self._candidates(b, generator), self._in_region, n, self.acceptance)
+        draws = sample_by_rejection(lambda b: self._candidates(b, generator).float().double(), self._in_region, n,
+                                    self.acceptance)
         return draws.reshape(*shape, -1)
 
 

@@ -10,19 +10,21 @@ import dataclasses
 from ...distributions.base import ParameterDistribution
 from ...stages import RoundContext
 
+_READS = {"linear": "linear read of its real data", "nearest": "simulations nearest its real data"}
+
 
 @dataclasses.dataclass(frozen=True)
 class ProposalSource:
-    """What a round's proposal is built from: round `round`'s posterior (0: the prior), or with `linear` the linear
-    read of that round's real data (escape.py), kept in its guard's artifact."""
+    """What a round's proposal is built from: round `round`'s posterior (0: the prior), or with `read` (escape.py's
+    linear | nearest) the Gaussian that round read off its real data, kept in its guard's artifact."""
 
     round: int = 0
-    linear: bool = False
+    read: str | None = None
 
     def describe(self) -> str:
         if self.round == 0:
             return "the prior"
-        return f"round {self.round}'s " + ("linear read of its real data" if self.linear else "posterior")
+        return f"round {self.round}'s " + (_READS[self.read] if self.read else "posterior")
 
 
 def handed_on_round(ctx: RoundContext, round_index: int) -> int:
@@ -35,7 +37,7 @@ def proposal_source(ctx: RoundContext, round_index: int) -> ProposalSource:
     if round_index == 0:
         return ProposalSource()
     guard = ctx.output("guard", round_index)
-    return ProposalSource(guard["proposes_from"], guard["proposes_linear"])
+    return ProposalSource(guard["proposes_from"], guard["proposes_read"])
 
 
 def posterior_of(ctx: RoundContext, prior: ParameterDistribution, source: int) -> ParameterDistribution:

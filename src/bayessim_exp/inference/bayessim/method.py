@@ -35,7 +35,7 @@ from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, MethodInputs, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition, tempered_product
-from .escape import ESCAPES, linear_read_at
+from .escape import ESCAPES, READS, read_at
 from .handed_on import ProposalSource, handed_on, handed_on_round, posterior_of, proposal_source
 from .identifiability_checks import log_findings, nominal_point, summaries_at
 from .model_checks import coverage_near_real, extrapolation
@@ -58,7 +58,7 @@ class BayesSimConfig:
     combination: str  # several real trajectories: dispersion | product (combination.py)
     replay_tempering: bool  # widen the posterior until the real trajectories lie among its replays
     on_guard: str  # a round the guard flags: warn | fallback | stop (diagnostics/guard.py)
-    escape: str  # where a round whose real data lie outside its simulations proposes the next: linear | posterior | none
+    escape: str  # where a round whose real data lie outside its simulations proposes the next (escape.py)
     importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
 
     def validate(self) -> None:
@@ -104,11 +104,11 @@ class BayesSim(InferenceMethod):
         r, proposal = ctx.round, None
         source = proposal_source(ctx, r - 1)
         if r > 1:
-            origin = (self._linear_read_distribution(ctx.output("guard", source.round)["linear_read"]) if source.linear
+            origin = (self._read_distribution(ctx.output("guard", source.round)["read"]) if source.read
                       else posterior_of(ctx, self.inputs.prior, source.round))
             proposal = self.proposer.build(origin, ProposalInputs(r, self.inputs.prior, self.probit, ctx.seed))
         return {"name": "prior" if proposal is None else self.proposer.name, "proposal": proposal,
-                "source": source.round, "source_linear": source.linear}
+                "source": source.round, "source_read": source.read}
 
     def proposal(self, ctx: RoundContext) -> ParameterDistribution:
         """The proposal stage's distribution; the prior where it has none."""
@@ -355,14 +355,14 @@ class BayesSim(InferenceMethod):
                                  local=checked.get("local_coverage"),
                                  extrapolation=None if widened_by_replays else checked.get("extrapolation"))
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
-        source, proposes, linear_read = r, ProposalSource(r), None
+        source, proposes, read = r, ProposalSource(r), None
         if action == "fallback":
             source = handed_on_round(ctx, r - 1)
             if self.cfg.escape == "none" or not report.near_real_data_only:  # the model failed: simulate more alike
-                proposes = ProposalSource(ctx.output("proposal")["source"], ctx.output("proposal")["source_linear"])
-            elif self.cfg.escape in ("linear", "nearest"):
-                linear_read = self._linear_read(ctx)
-                proposes = ProposalSource(r, linear=True)
+                proposes = ProposalSource(ctx.output("proposal")["source"], ctx.output("proposal")["source_read"])
+            elif self.cfg.escape in READS:
+                read = self._read(ctx)
+                proposes = ProposalSource(r, self.cfg.escape)
         for warning in report.warnings:
             log.warning("round %d: %s", r, warning)
         if action == "fallback":
@@ -371,20 +371,20 @@ class BayesSim(InferenceMethod):
             log.warning("round %d: the guard failed; domain randomization gets %s instead (method.on_guard=fallback); "
                         "the next round proposes from %s (%s)", r, _round_name(source), proposes.describe(), why)
         return {**report.to_dict(), "action": action, "handed_on": source, "proposes_from": proposes.round,
-                "proposes_linear": proposes.linear, "linear_read": linear_read}
+                "proposes_read": proposes.read, "read": read}
 
-    def _linear_read(self, ctx: RoundContext) -> dict:
-        """escape.linear_read_at on the rounds the model is trained on: their training rows fitted, the round's
-        held-out rows checked, read at the real summaries, in the model's coordinates."""
+    def _read(self, ctx: RoundContext) -> dict:
+        """escape.read_at (method.escape's read) on the rounds the model is trained on: their training rows fitted,
+        the round's held-out rows checked, read at the real summaries, in the model's coordinates."""
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
-        mean, cov = linear_read_at(torch.cat([d[1] for d in data]), self._fitted_space(torch.cat([d[0] for d in data])),
+        mean, cov = read_at(torch.cat([d[1] for d in data]), self._fitted_space(torch.cat([d[0] for d in data])),
                                    data[-1][3], self._fitted_space(data[-1][2]),
                                    ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]),
                                    nearest=self.cfg.escape == "nearest")
         return {"mean": mean, "cov": cov}
 
-    def _linear_read_distribution(self, read: dict) -> ParameterDistribution:
-        """The Gaussian of a linear read, in parameter units: mapped back from probit space, or truncated to the box."""
+    def _read_distribution(self, read: dict) -> ParameterDistribution:
+        """The Gaussian of a read, in parameter units: mapped back from probit space, or truncated to the box."""
         gaussian = GaussianMixture(torch.zeros(1), read["mean"][None], read["cov"][None])
         if self.probit is not None:
             return ProbitPosterior(gaussian, self.probit)
@@ -413,13 +413,13 @@ class BayesSim(InferenceMethod):
             "joint_spread": hist.get("joint_spread"),  # the common factor on the spread (models/spread.py)
             "proposal": self._proposal_name(ctx),
             "proposal_from": ProposalSource(ctx.output("proposal")["source"],
-                                            ctx.output("proposal")["source_linear"]).describe(),
+                                            ctx.output("proposal")["source_read"]).describe(),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],
             "identifiability": {k: v for k, v in ctx.output("identifiability").items() if k != "seconds"},
             "guard": {**{k: guard[k] for k in ("ok", "failed", "near_real_data_only", "warnings", "action")},
                       "handed_on": _round_name(guard["handed_on"]),
-                      "proposes_from": ProposalSource(guard["proposes_from"], guard["proposes_linear"]).describe()},
+                      "proposes_from": ProposalSource(guard["proposes_from"], guard["proposes_read"]).describe()},
             "dispersion": conditioned["dispersion"],
             "temperature": conditioned["temperature"],
             "product_temperature": conditioned["product_temperature"],

@@ -71,7 +71,7 @@ class RelaxedCover:
         self.tilted_chol = tilted_chol
 
     def _log_accept(self, u: torch.Tensor) -> torch.Tensor:
-        f = -0.5 * torch.einsum("ni,kij,nj->nk", u, self.A, u) + u @ self.b.T
+        f = torch.stack([-0.5 * ((u @ a) * u).sum(-1) for a in self.A], -1) + u @ self.b.T  # one product a component
         return -torch.logsumexp(self.beta * (f - self.h), -1)
 
     def draw(self, n: int, generator: torch.Generator | None = None) -> torch.Tensor:

@@ -93,7 +93,7 @@ class BayesSim(InferenceMethod):
             Stage("fit", self.fit, inputs=("proposal", "summarize")),
             Stage("condition", self.condition, inputs=("real", "proposal", "fit")),
             Stage("model_check", self.model_check, inputs=("real", "proposal", "summarize", "fit", "condition")),
-            Stage("guard", self.guard, inputs=("proposal", "fit", "condition", "model_check")),
+            Stage("guard", self.guard, inputs=("proposal", "summarize", "fit", "condition", "model_check")),
         ]
 
     # stages --------------------------------------------------------------------------

@@ -261,7 +261,7 @@ def test_a_round_whose_real_data_lie_outside_its_simulations_still_moves_the_nex
     """Round 1's real data lie outside its simulations: domain randomization gets the prior, but round 2 proposes
     from where round 1 points (method.escape), not from the prior again; results.json says which."""
     _outside_in(monkeypatch, 1)
-    results = Pipeline(compose(GUARDED + ["rounds=2", f"method.escape={escape}"]), tmp_path).run()
+    results = Pipeline(compose(SMOKE + [f"method.escape={escape}"]), tmp_path).run()
     first, second = results["rounds"]
     source = "round 1's " + {"posterior": "posterior", "linear": "linear read of its real data",
                              "nearest": "simulations nearest its real data"}[escape]
@@ -285,7 +285,7 @@ def test_without_escape_or_with_a_model_failure_the_next_round_proposes_as_this_
     what the failing round proposed from (here the prior)."""
     _outside_in(monkeypatch, 1, model_failure)
     escape = "nearest" if model_failure else "none"
-    results = Pipeline(compose(GUARDED + ["rounds=2", f"method.escape={escape}"]), tmp_path).run()
+    results = Pipeline(compose(SMOKE + [f"method.escape={escape}"]), tmp_path).run()
     first, second = results["rounds"]
     assert first["guard"]["near_real_data_only"] is not model_failure
     assert (first["guard"]["proposes_from"], second["proposal"], second["proposal_from"]) == (

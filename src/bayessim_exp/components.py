@@ -19,6 +19,7 @@ from . import registry
 from .distributions.base import ParameterDistribution
 from .errors import ConfigError
 from .inference.base import InferenceMethod, MethodInputs, PolicyFactory
+from .machine import fit_to_machine
 from .models.base import PosteriorModel
 from .real import RealSource
 from .run_config import RunConfig
@@ -57,6 +58,7 @@ class CollectPolicies:
 class Components:
     """What a run simulates and observes; the RL component and the inference method are built from these."""
 
+    cfg: DictConfig  # the config as run: the composed one with this machine's choices (machine.py)
     rc: RunConfig
     task: Task
     prior: ParameterDistribution
@@ -73,7 +75,9 @@ class Components:
 
 
 def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
-    """Build and check every component but the RL component and the method (build_rl, the pipeline)."""
+    """Build and check every component but the RL component and the method (build_rl, the pipeline), after the
+    config is checked against this machine."""
+    cfg = fit_to_machine(cfg, rc)
     for group in registry.GROUPS:
         if group not in cfg:
             raise ConfigError(f"config has no {group!r} group; allowed: {', '.join(registry.names(group))}")
@@ -91,7 +95,7 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     real.check(rc.collect.horizon)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)
-    return Components(rc, task, prior, sims, summarizer, real, x_dim, model, policy)
+    return Components(cfg, rc, task, prior, sims, summarizer, real, x_dim, model, policy)
 
 
 def build_rl(cfg: DictConfig, comp: Components,

@@ -36,10 +36,10 @@ from .stages import RoundContext, Stage, check_stages, run_stage
 
 class Pipeline:
     def __init__(self, cfg: DictConfig, out_dir: str | Path):
-        self.cfg = cfg
         self.rc = check_run_config(cfg)
         registry.load_plugins(self.rc.plugins)
         comp = build_components(cfg, self.rc)  # every config error surfaces here or below, before any simulation
+        self.cfg = cfg = comp.cfg  # with this machine's choices: what config.yaml records
         self.task, self.prior, self.real_source = comp.task, comp.prior, comp.real
         self.rl = build_rl(cfg, comp, self._posterior)
         self.policy: CollectPolicies = dataclasses.replace(comp.policy, actor=self.rl.actor)

@@ -126,3 +126,9 @@ def test_an_unknown_option_lists_the_allowed_ones_registered_plugins_included(mo
     assert parse_params("method", {"name": "bayessim", "proposal": "half_prior"})[1].proposal == "half_prior"
     with pytest.raises(ConfigError, match="allowed: prior, posterior, gaussian, truncated, half_prior"):
         proposal_named("tsnpe")
+
+
+def test_an_unknown_escape_lists_the_allowed_ones():
+    assert parse_params("method", {"name": "bayessim", "escape": "nearest"})[1].escape == "nearest"
+    with pytest.raises(ConfigError, match="escape='sysid' not allowed; allowed: linear, nearest, posterior, none"):
+        parse_params("method", {"name": "bayessim", "escape": "sysid"})

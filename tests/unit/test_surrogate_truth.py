@@ -25,3 +25,20 @@ def test_the_default_truth_is_the_tasks_and_an_unknown_one_is_refused(compose, t
     np.testing.assert_array_equal(_truth(compose, tmp_path / "task"), [1.0, 0.5])
     with pytest.raises(ConfigError, match="truth='sampled' not allowed; allowed: task, prior"):
         _truth(compose, tmp_path / "bad", "real.truth=sampled")
+
+
+def test_nominal_truths_are_the_mjcf_values_then_one_to_three_moved(compose, tmp_path):
+    """real.truth=nominal: seed 0 every parameter at its nominal value (kept 2 % inside the prior's CDF: Pendulum's
+    length of 1 m is the box's face), later seeds 1 + (seed - 1) % 3 parameters with a nonzero nominal moved x0.5 or
+    x2, then kept inside; Cartpole's additive parameters (nominal 0) at 2 % of their ranges, never moved."""
+    np.testing.assert_allclose(_truth(compose, tmp_path / "p0", "real.truth=nominal", "seed=0"), [1.0, 0.985])
+    nominal = _truth(compose, tmp_path / "c0", "task=Cartpole", "real.truth=nominal", "seed=0")
+    additive = slice(4, 12)  # conf/task/Cartpole.yaml: dampings, stiffnesses, frictions, armatures
+    np.testing.assert_allclose(nominal[[0, 1, 2, 3, 12]], [1.0, 0.1, 1.0, 0.05, 10.0])
+    low = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    high = np.array([5.0, 0.05, 10.0, 0.5, 1.0, 0.02, 1.0, 0.02])
+    np.testing.assert_allclose(nominal[additive], low + 0.02 * (high - low))
+    for seed in range(1, 7):
+        moved = _truth(compose, tmp_path / f"c{seed}", "task=Cartpole", "real.truth=nominal", f"seed={seed}")
+        changed = np.flatnonzero(~np.isclose(moved, nominal))
+        assert 1 <= len(changed) <= 1 + (seed - 1) % 3 and set(changed) <= {0, 1, 2, 3, 12}, (seed, changed)

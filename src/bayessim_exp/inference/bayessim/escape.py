@@ -31,17 +31,18 @@ READS = ("linear", "nearest")  # the escapes that read a Gaussian off the real d
 ESCAPES = (*READS, "posterior", "none")
 NEAREST = 0.02  # the share of the fitted simulations whose linear reads lie nearest the real data's (nearest)
 PENALTIES = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5)  # on standardised summaries, each parameter's by held-out error
-INFLATE = 4.0
+INFLATE = 4.0  # a read's covariance is widened so (twice its standard deviation) that its region holds the truth
 # the latest fitted rows the read is fitted on: with thousands of summary features (signatures) the ridge is solved
 # in its rows-by-rows dual, and 18,000 rows took 200 s of ShadowHand's guard stage on an H200 machine
-MAX_ROWS = 4096  # the read's error covariance is widened so (twice its standard deviation) that its region holds the truth
+MAX_ROWS = 4096
 
 
 def read_at(x_fit: torch.Tensor, u_fit: torch.Tensor, x_check: torch.Tensor, u_check: torch.Tensor,
-                   x_real: torch.Tensor, inflate: float = INFLATE, nearest: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+            x_real: torch.Tensor, inflate: float = INFLATE, nearest: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """(mean [D], covariance [D, D]) of the parameters u the real summaries x_real [n, F] point to: the ridge
-    regression fitted on (x_fit [N, F], u_fit [N, D]), each coordinate's penalty and the error covariance taken on
-    (x_check, u_check), read at the mean of the n real summaries' predictions."""
+    regression fitted on the last MAX_ROWS of (x_fit [N, F], u_fit [N, D]), each coordinate's penalty and the error
+    covariance taken on (x_check, u_check), read at the mean of the n real summaries' predictions (`linear`); with
+    `nearest`, the mean and covariance of the fitted simulations whose reads lie nearest that one instead."""
     x_fit, u_fit = x_fit[-MAX_ROWS:].double(), u_fit[-MAX_ROWS:].double()
     varying = ~constant_columns(x_fit)
     mean, std = x_fit[:, varying].mean(0), x_fit[:, varying].std(0)

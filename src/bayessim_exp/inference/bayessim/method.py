@@ -378,9 +378,9 @@ class BayesSim(InferenceMethod):
         the round's held-out rows checked, read at the real summaries, in the model's coordinates."""
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         mean, cov = read_at(torch.cat([d[1] for d in data]), self._fitted_space(torch.cat([d[0] for d in data])),
-                                   data[-1][3], self._fitted_space(data[-1][2]),
-                                   ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]),
-                                   nearest=self.cfg.escape == "nearest")
+                            data[-1][3], self._fitted_space(data[-1][2]),
+                            ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]),
+                            nearest=self.cfg.escape == "nearest")
         return {"mean": mean, "cov": cov}
 
     def _read_distribution(self, read: dict) -> ParameterDistribution:

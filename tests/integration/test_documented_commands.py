@@ -118,9 +118,10 @@ def rl_benchmark():
 
 
 def test_rl_benchmark_gpu_command_sizes_are_whole_batches():
-    """The docstring's GPU command, built here (nothing simulated): 8,192 environments x 16 steps a batch."""
+    """The docstring's GPU command, built here on the CPU (nothing simulated; batch sizes do not depend on the
+    device): 8,192 environments x 16 steps a batch."""
     args = documented_commands(REPO / "benchmarks" / "rl.py")[1]
-    overrides = args[args.index("--overrides") + 1:]
+    overrides = [*args[args.index("--overrides") + 1:], "device=cpu"]
     rl = rl_benchmark()
     assert rl.components("Cartpole", overrides, 262144)[1].train_cfg.total_steps == 262144  # 2 batches
     assert rl.components("Cartpole", overrides, 3_000_000)[1].train_cfg.total_steps == 23 * 8192 * 16  # rounded up

@@ -1,5 +1,7 @@
 """Replaying recorded trajectories: observation -> state hooks, exact replays, and the replayed check."""
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -9,6 +11,7 @@ from bayessim_exp.diagnostics.replay import replay
 from bayessim_exp.diagnostics.replayed_check import replayed_check
 from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.policies import RandomPolicy
+from bayessim_exp.sim.trajectories import Trajectories
 from bayessim_exp.sim.pool import SimulatorPool
 
 
@@ -97,6 +100,42 @@ def test_data_no_parameter_reproduces_are_flagged_and_give_a_model_error(compose
     assert torch.linalg.eigvalsh(check.model_error_covariance - check.posterior_covariance).max() > 0
 
 
+def _linear_trajectories(z: torch.Tensor) -> Trajectories:
+    """Trajectories whose one state row is the summary z [N, F] (summarized by reading it back)."""
+    n = len(z)
+    return Trajectories(z[:, None].float(), torch.zeros(n, 0, 1), torch.zeros(n, 0), torch.zeros(n, 0, dtype=torch.bool),
+                        torch.zeros(n, dtype=torch.bool), 0.05)
+
+
+def test_the_model_error_is_least_squares_spread_of_each_features_unexplained_part():
+    """A simulator whose 6 summaries are exactly linear in 2 parameters (slopes A), and real data with an offset e
+    that no parameter explains. The error covariance is the sandwich G^-1 B^T diag(v) B G^-1, v each standardised
+    feature's unexplained square (the replays leave none): here computed from A and e alone. An offset in two of the
+    six features costs 4 to 10 times less variance than the whole residual put in every feature (r^2 G^-1, the
+    rule before) would."""
+    A = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0], [0.01, 0.0], [0.0, 0.01]], dtype=torch.float64)
+    offset = torch.tensor([0.0, 0.0, 0.0, 0.0, 0.3, -0.2], dtype=torch.float64)
+    centre = torch.tensor([[1.0, 0.5]], dtype=torch.float64)
+    real = _linear_trajectories(centre @ A.T + offset)
+    posterior = GaussianMixture(torch.zeros(1), centre, 0.01 * torch.eye(2, dtype=torch.float64)[None])
+    prior = GaussianMixture(torch.zeros(1), centre, torch.eye(2, dtype=torch.float64)[None])
+    check = replayed_check(lambda theta, which: _linear_trajectories(theta @ A.T), real, posterior, prior,
+                           summarize=lambda traj: traj.states[:, 0].double(), num=400, seed=0, alpha=0.01,
+                           max_distance_ratio=0.15)
+    assert check.residual_p_value[0] <= 0.01
+    g = torch.Generator().manual_seed(0)
+    scale = (prior.sample((400,), generator=g) @ A.T).std(0)  # the prior replays' spread, as the check measures it
+    B = A / scale[:, None] / math.sqrt(6)  # standardised slopes
+    gram = B.T @ B
+    hat = B @ torch.linalg.solve(gram, B.T)
+    unexplained = (torch.eye(6, dtype=torch.float64) - hat) @ (offset / scale / math.sqrt(6))
+    inverse = torch.linalg.inv(gram)
+    expected = inverse @ (B.T * unexplained**2) @ B @ inverse
+    torch.testing.assert_close(check.model_error_covariance, expected, rtol=0.05, atol=1e-9)
+    whole = unexplained.pow(2).sum() * inverse
+    assert (torch.diagonal(whole) > 4 * torch.diagonal(check.model_error_covariance)).all()
+
+
 def test_a_parameter_every_replay_shares_gets_no_slope_and_its_value_as_implied():
     """Seed 19 of a Pendulum calibration study stopped here: every posterior draw of one parameter on the box's
     edge made the linear fit's normal matrix singular. z = 2 theta_0 + noise; theta_1 constant at 2.0."""
@@ -105,7 +144,7 @@ def test_a_parameter_every_replay_shares_gets_no_slope_and_its_value_as_implied(
     g = torch.Generator().manual_seed(0)
     theta = torch.stack([torch.randn(100, dtype=torch.float64, generator=g), torch.full((100,), 2.0, dtype=torch.float64)], 1)
     z = 2 * theta[:, :1] + 0.01 * torch.randn(100, 1, dtype=torch.float64, generator=g)
-    implied, residual, _ = _implied_parameters(z, theta, torch.tensor([[1.0]], dtype=torch.float64))
+    implied, residual, _, _, _ = _implied_parameters(z, theta, torch.tensor([[1.0]], dtype=torch.float64))
     assert torch.isfinite(implied).all() and torch.isfinite(residual).all()
     assert implied[0, 0] == pytest.approx(0.5 + float(theta[:, 0].mean()) - float(z.mean()) / 2, abs=0.01)
     assert implied[0, 1] == 2.0

@@ -26,7 +26,7 @@ test:  ## the test suite as CI runs it, all but the mjx lane (skip reasons print
 test-mjx:  ## MJX against native MuJoCo on the larger models (about a minute each to compile on a CPU)
 	$(PYTEST) -m mjx tests
 
-test-fast:  ## the tests marked neither slow nor mjx nor gpu (under 3 minutes on 2 cores)
+test-fast:  ## the tests marked neither slow nor mjx nor gpu (a few minutes, while editing)
 	$(PYTEST) -m "not slow and not mjx and not gpu" tests
 
 durations:  ## both lanes, each test's seconds written to tests/durations.json (the order make test starts them in)

@@ -35,6 +35,7 @@ def test_the_temperature_must_be_in_the_unit_interval():
         posterior([gaussian([0.0, 0.0])], BOX, temperature=1.5)
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_cochran_q_of_consistent_posteriors_follows_chi2():
     """Means drawn from N(theta, C_i), posteriors N(mean_i, C_i): E[Q] = dof and p-values uniform."""
     g = torch.Generator().manual_seed(0)

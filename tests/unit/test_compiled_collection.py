@@ -8,10 +8,6 @@ equal or to the same tolerance. MJX compiles for tens of seconds on a CPU: tiny 
 
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")  # a compiled MJX loop on CPU has hung without it
-
 import dataclasses
 
 import pytest
@@ -28,7 +24,7 @@ from bayessim_exp.rl.env import SimulatorEnv, distribution_sampler  # noqa: E402
 from bayessim_exp.rl.ppo import PPOTrainer, make_agent  # noqa: E402
 from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_compiled_collection")]  # one worker: one MJX setup
 ENVS, STEPS, BATCHES = 3, 8, 2
 TOL = 1e-4
 

@@ -64,7 +64,7 @@ def test_an_overconfident_posterior_fails_the_band():
     assert report["hpd"]["0.9"] < 0.9 - BAND["0.9"] and report["hpd"]["0.5"] < 0.5 - BAND["0.5"], report
 
 
-@pytest.mark.parametrize("name", ["mdnn", "mdrff"])
+@pytest.mark.parametrize("name", ["mdnn", pytest.param("mdrff", marks=pytest.mark.slow)])  # mdrff: over 10 s
 def test_trained_models_are_calibrated_in_probit_space(name):
     """The mixture models at their defaults (calibrated spread), fitted in probit space as the pipeline fits them."""
     torch.set_num_threads(1)

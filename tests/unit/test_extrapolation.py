@@ -32,6 +32,7 @@ def _p_values(real_theta, g: torch.Generator, train: int = 2000, held: int = 500
     return inputs_outside(_simulate(real_theta, g), _simulate(theta, g), theta, _simulate(_prior(held, g), g), ALPHA)
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_p_values_are_uniform_when_the_real_data_are_drawn_like_the_held_out_ones():
     g = torch.Generator().manual_seed(0)
     p = torch.tensor([_p_values(_prior(1, g), g)["p_value"][0] for _ in range(REPEATS)])
@@ -40,6 +41,7 @@ def test_p_values_are_uniform_when_the_real_data_are_drawn_like_the_held_out_one
         assert abs(share - level) < 3 * (level * (1 - level) / REPEATS) ** 0.5, (level, share)
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_several_real_summaries_of_one_hidden_system_raise_at_most_alpha_false_alarms():
     """Three trajectories of one system drawn from the prior (a calibration study's truth) are not independent; the
     Bonferroni threshold alpha / n holds whatever their dependence."""

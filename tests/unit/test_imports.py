@@ -16,6 +16,7 @@ from bayessim_exp import registry
 from bayessim_exp.errors import ConfigError
 
 
+@pytest.mark.slow  # a fresh Python process importing torch: make test, not make test-fast
 def test_a_pipeline_process_fits_a_model_and_checks_mismatch_without_dynamo_scipy_stats_or_jax():
     # torch._dynamo (torch.optim imports it: 1.7 s here, 5.4 s on the H100 host; models/adam.py);
     # scipy.stats 0.3 s on top of scipy.optimize (which the MDN's spread calibration needs);
@@ -31,6 +32,7 @@ def test_a_pipeline_process_fits_a_model_and_checks_mismatch_without_dynamo_scip
     assert out.stdout.split() == ["[1.0]", "False", "False", "False"]
 
 
+@pytest.mark.slow  # a fresh Python process importing torch: make test, not make test-fast
 def test_checking_every_groups_config_loads_neither_torchrl_nor_jax_nor_the_factories():
     # the registry lists built-in options by import path: checking a config imports only the modules of
     # the options' dataclasses (rl=ppo's lives apart from its torchrl component), building one its factory's

@@ -18,7 +18,9 @@ def linear_gaussian(n, seed=0, noise=0.3):
     return theta, x, A, noise
 
 
-@pytest.mark.parametrize("covariance, ensemble", [("full", 1), ("diagonal", 1), ("diagonal", 3)])
+# the ensemble of three: over 10 s, make test only
+@pytest.mark.parametrize("covariance, ensemble", [("full", 1), ("diagonal", 1),
+                                                 pytest.param("diagonal", 3, marks=pytest.mark.slow)])
 def test_mdnn_matches_analytic_gaussian_posterior(covariance, ensemble):
     theta, x, A, noise = linear_gaussian(12_000)
     fitted = api.fit_posterior_model("mdnn", theta, x, components=2, covariance=covariance, max_epochs=60,
@@ -34,6 +36,7 @@ def test_mdnn_matches_analytic_gaussian_posterior(covariance, ensemble):
         torch.testing.assert_close(post.covariance[0, 1].float(), cov[0, 1], atol=0.01, rtol=0)
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_several_observations_combine_to_the_n_observation_posterior():
     theta, x, A, noise = linear_gaussian(12_000, seed=1)
     fitted = api.fit_posterior_model("mdnn", theta, x, components=1, max_epochs=60, patience=10, hidden=[64, 64])

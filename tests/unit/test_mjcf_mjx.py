@@ -5,10 +5,6 @@ One tiny model and few steps: MJX compiles for tens of seconds per model on a CP
 
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")  # a compiled MJX loop on CPU has hung without it
-
 import numpy as np
 import pytest
 

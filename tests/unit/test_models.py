@@ -49,12 +49,18 @@ def _assert_close_to(dist, mean, cov):
     assert ((ratio > 0.75) & (ratio < 1.33)).all(), ratio
 
 
-@pytest.fixture(scope="module", params=list(CONFIGS))
+# the tests that share the fitted models run on one worker under xdist (tests/conftest.py), each model fitted
+# once; the flow's fit takes over 10 s: make test, not make test-fast
+SHARES_FITTED = pytest.mark.xdist_group("test_models_fitted")
+
+
+@pytest.fixture(scope="module", params=[pytest.param(n, marks=pytest.mark.slow) if n == "flow" else n for n in CONFIGS])
 def fitted(request):
     theta = gaussian_draws(PRIOR.loc, PRIOR.covariance_matrix, 4000, seed=0)
     return request.param, _fit(request.param, theta)
 
 
+@SHARES_FITTED
 def test_posterior_matches_the_analytic_posterior(fitted):
     _, model = fitted
     xs = SIM.simulate(TRUE_THETAS, seed=10)
@@ -62,6 +68,7 @@ def test_posterior_matches_the_analytic_posterior(fitted):
         _assert_close_to(posterior([model.conditional(x)], PRIOR, PRIOR), *SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[None]))
 
 
+@pytest.mark.gpu
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
 @pytest.mark.parametrize("name", list(CONFIGS))
 def test_training_on_a_gpu_replays_a_cuda_graph_and_matches_the_analytic_posterior(name, caplog):
@@ -75,6 +82,7 @@ def test_training_on_a_gpu_replays_a_cuda_graph_and_matches_the_analytic_posteri
         _assert_close_to(posterior([model.conditional(x)], PRIOR, PRIOR), *SIM.posterior(PRIOR.loc, PRIOR.covariance_matrix, x[None]))
 
 
+@SHARES_FITTED
 def test_state_dict_round_trip(fitted):
     name, model = fitted
     clone = build("model", {"name": name, **CONFIGS[name]}, theta_dim=2, x_dim=3)
@@ -84,6 +92,7 @@ def test_state_dict_round_trip(fitted):
     torch.testing.assert_close(clone.conditional(x).log_prob(theta), model.conditional(x).log_prob(theta))
 
 
+@SHARES_FITTED
 def test_a_state_saved_before_split_seeds_were_kept_loads_and_fine_tunes(fitted):
     """Posterior files and run directories written before the split seed was part of a model's state load
     unchanged and fine-tune, splitting with the new fit's seed."""
@@ -183,7 +192,7 @@ def test_calibration_recovers_a_known_spread_factor(name):
         assert ((found / (factor * torch.exp(before)) - 1).abs() < 0.06).all(), (stretch, found, torch.exp(before))
 
 
-@pytest.mark.parametrize("name", ["mdnn", "mdrff"])
+@pytest.mark.parametrize("name", ["mdnn", pytest.param("mdrff", marks=pytest.mark.slow)])  # mdrff: over 10 s
 def test_the_spread_is_calibrated_on_the_calibration_rows_only(name):
     """Rounds pooled from several proposals: half the pairs exact, half with their parameters blurred by
     noise as wide as the exact posterior (which the model, trained on both, cannot tell apart). Calibrated

@@ -19,6 +19,7 @@ from bayessim_exp.recorded import resample
 from bayessim_exp.sim.pool import SimulatorPool
 from robot_logs import NAMES, pendulum_frames, write_csv, write_lerobot
 
+pytestmark = pytest.mark.xdist_group("test_real_logs")  # one worker: `recorded` is made once
 STEPS, FAST = 30, 5  # control steps; the fast log's frames per control step (100 Hz for 20 Hz)
 
 

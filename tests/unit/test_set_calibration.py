@@ -40,11 +40,13 @@ def _fitted(squeeze: float, n: int = 3) -> float:
     return product_temperature(levels_at, (0.5, 0.9))[0]
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_exact_per_trajectory_posteriors_keep_about_the_plain_product():
     """400 sets: a share's standard error is 0.025 at 50 %, so the fitted tau stays within an eighth of a doubling."""
     assert _fitted(squeeze=1.0) >= 2 ** (-1 / 8)
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_per_trajectory_posteriors_too_narrow_widen_the_product_to_the_calibrated_temperature():
     """Variances at a third of the exact ones (precision 15 instead of 5): each q_i / p has precision 14 and mean
     (12/14) x_i, so the tempered posterior of three has precision 1 + 42 tau and mean c xbar, c = 36 tau / (1 + 42

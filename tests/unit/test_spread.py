@@ -49,7 +49,7 @@ def test_the_factor_undoes_a_known_narrowing(components, correlated, narrowed_by
         assert record["inside_unscaled"]["0.5"] < 0.3, record
 
 
-@pytest.mark.parametrize("widened_by", [1.3, 1.9])
+@pytest.mark.parametrize("widened_by", [1.3, pytest.param(1.9, marks=pytest.mark.slow)])  # 1.9: over 10 s
 def test_an_underconfident_mixture_is_narrowed_until_its_regions_hold_their_share(widened_by):
     """A mixture wider than calibrated at every level gets the factor that undoes it: narrowed in 1 % steps while
     both regions still hold their share, so it stops within a few steps above 1 / widened_by, and the shares it
@@ -60,6 +60,7 @@ def test_an_underconfident_mixture_is_narrowed_until_its_regions_hold_their_shar
     assert record["inside_unscaled"]["0.5"] > 0.8 and record["inside"]["0.5"] >= 0.5 and record["inside"]["0.9"] >= 0.9
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_diagonal_factors_give_the_same_factor_by_either_path():
     log_w, means, U, theta = _mixtures(3, False, seed=4)
     assert joint_factor(log_w, means, U * 1.2, theta, diagonal=True, seed=0) == \
@@ -99,6 +100,7 @@ def test_fine_tuning_splits_with_the_first_fits_seed(monkeypatch):
     assert torch.equal(splits[1][splits[1] < 300], splits[0])
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_a_narrow_wrong_member_is_told_apart_from_calibrated_ones():
     """Three members: two exact, one a third as wide and shifted by 2 along every whitened axis of the exact one.
     The ensemble needs widening (the narrow member's draws are denser than every theta); per member, the exact

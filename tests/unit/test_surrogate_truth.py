@@ -11,6 +11,7 @@ def _truth(compose, tmp_path, *overrides):
     return Pipeline(compose(["debug=smoke", *overrides]), tmp_path).real_source.true_params
 
 
+@pytest.mark.slow  # 21 pipelines built: make test, not make test-fast
 def test_each_seed_draws_its_own_truth_from_the_prior_reproducibly(compose, tmp_path):
     truths = [_truth(compose, tmp_path / str(seed), "real.truth=prior", f"seed={seed}") for seed in range(20)]
     low, high = np.array([0.5, 0.25]), np.array([2.0, 1.0])  # conf/task/Pendulum.yaml

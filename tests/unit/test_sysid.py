@@ -51,6 +51,7 @@ def identify(cfg, task, prior, sims, real):
     return result, gaussian
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_noisy_observations_give_the_truth_within_a_few_stated_standard_deviations(compose):
     cfg, task, prior, sims, real = pendulum(compose, noise=0.05)
     result, gaussian = identify(cfg, task, prior, sims, real)
@@ -67,6 +68,7 @@ def test_noisy_observations_give_the_truth_within_a_few_stated_standard_deviatio
                                atol=0.1 * float(std.min()), rtol=0)
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_noise_free_observations_give_the_truth_and_the_floored_noise(compose):
     cfg, task, prior, sims, real = pendulum(compose)
     result, gaussian = identify(cfg, task, prior, sims, real)
@@ -78,6 +80,7 @@ def test_noise_free_observations_give_the_truth_and_the_floored_noise(compose):
     assert (gaussian.cov.diagonal().sqrt() < 0.01 * prior.stddev).all()
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_a_fit_stuck_in_a_local_minimum_from_the_prior_mean_is_left_for_a_screened_start(compose):
     # this truth and excitation: Gauss-Newton from the prior's mean stops with residuals as large as the signal
     cfg, task, prior, sims, _ = pendulum(compose, ["task.real_params.mass=0.598", "task.real_params.length=0.390"])
@@ -93,6 +96,7 @@ def test_a_fit_stuck_in_a_local_minimum_from_the_prior_mean_is_left_for_a_screen
     np.testing.assert_allclose(residual.theta(found.estimate), task.true_params, atol=1e-6)
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_a_parameter_no_observation_depends_on_keeps_the_prior_spread(compose):
     cfg, task, prior, sims, real = pendulum(compose, COLOUR, noise=0.05)
     result, gaussian = identify(cfg, task, prior, sims, real)
@@ -109,6 +113,7 @@ def test_a_parameter_no_observation_depends_on_keeps_the_prior_spread(compose):
     assert ((gaussian.mean - truth) / std)[:c].abs().max() < 4
 
 
+@pytest.mark.slow  # a known-answer study taking over 10 s: make test, not make test-fast
 def test_parameters_that_only_trade_off_against_each_other_keep_the_prior_spread(compose):
     # a second mass scaling the same body: the data fix only the product of the two
     trade = ['+task.parameters.mass2={range: [0.5, 2.0], operation: scaling, targets: ["body_mass[pole]", '

@@ -11,8 +11,8 @@ from bayessim_exp.diagnostics.replay import replay
 from bayessim_exp.diagnostics.replayed_check import replayed_check
 from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.policies import RandomPolicy
-from bayessim_exp.sim.trajectories import Trajectories
 from bayessim_exp.sim.pool import SimulatorPool
+from bayessim_exp.sim.trajectories import Trajectories
 
 
 def _task(compose, name):

@@ -28,8 +28,8 @@ the parameter covariance that least squares would have with errors of those vari
 G^-1 B^T diag(v) B G^-1 with G = B^T B (the sandwich estimator), averaged over the real trajectories
 (`model_error_covariance`): an error in features the parameters barely move costs little width, one in features
 that pin a parameter down costs that parameter's. (Until 6bdc798 it was r^2 G^-1, r^2 the whole residual's
-excess: as if every feature carried all of the error, about as many times too wide as there are features; on the
-foreign-dynamics benchmark's other integrators that kept 15 % of the information of data from our own simulator.)
+excess: as if every feature carried all of the error, for an error spread over F features about F times the
+variance; docs/statistics.md has what each kept on the foreign-dynamics benchmark.)
 
 Two readings (docs/statistics.md):
 - `too_narrow`: p <= alpha, the real data's implied parameters lie outside the posterior. Either the

@@ -165,8 +165,8 @@ def _rank(replays: torch.Tensor, real: torch.Tensor) -> float:
 def _implied_parameters(z: torch.Tensor, theta: torch.Tensor,
                         queries: torch.Tensor) -> tuple[torch.Tensor, ...]:
     """The least-squares linear map z ~ a + B (theta - mean) over the replays (z [m, F], theta [m, D]);
-    for each query summary [k, F] its implied parameters [k, D] and its RMS residual from the map [k];
-    and B^T B. Both normal matrices are regularised by a relative 1e-9: a parameter the replays do not vary
+    for each query summary [k, F] its implied parameters [k, D], its RMS residual from the map [k]; B^T B; the
+    slopes B [F, D]; and each query's residual per feature [k, F]. Both normal matrices are regularised by a relative 1e-9: a parameter the replays do not vary
     (every posterior draw on the box's edge) or the summaries ignore gets no slope and its mean as implied value."""
     mean_theta, mean_z = theta.mean(0), z.mean(0)
     design = theta - mean_theta

@@ -13,8 +13,8 @@ raised to tau (correction.posterior's `temperature`, on top of the dispersion co
 two steps from the replayed check of the posterior at tau = 1:
 
 1. a model-error allowance: the largest tau at which the posterior's covariance (Sigma / tau, as for a
-   Gaussian) contains the model error's (ReplayCheck.model_error_covariance: the spread of the parameters
-   that the unexplained part of the real summaries, feature by feature, leaves), capped at the prior's in every direction
+   Gaussian) contains the model error's (ReplayCheck.model_error_covariance: the parameters' spread that what
+   the real summaries leave unexplained, feature by feature, allows), capped at the prior's in every direction
    (a parameter the summaries barely see would otherwise send tau to zero for all of them);
 2. then halved until no real trajectory's implied parameters lie outside the posterior (`too_narrow`) or
    tau reaches TEMPERATURE_FLOOR.

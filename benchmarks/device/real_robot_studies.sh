@@ -10,11 +10,11 @@
 # - franka_<escape>: FrankaCabinet at its own real_params (BayesSimIG's robot, in the prior's joint tail), seeds 0-2;
 # - shadow_<escape>: ShadowHand with every link mass at the MJCF's value (multiplier 1: what a real hand most likely
 #   is, |u|^2 = 43 in probit space against 24 for a typical prior draw), its other real_params, seeds 0-2;
-#   both once per method.escape in $ESCAPES (default: linear nearest posterior);
-# - mission_gpu, mission_cpu: the mission's command `task=ShadowHand summarizer=signatory`, on the GPU (sim=auto) and
-#   on native MuJoCo with device=cpu;
+#   both once per method.escape in $ESCAPES (default: linear both);
+# - mission_gpu, mission_cpu: the mission's command `task=ShadowHand summarizer=signatory`, on the GPU (sim=auto, the
+#   default pysiglib) and on native MuJoCo with device=cpu ($MISSION_THREADS threads for simulation and fit, default 6);
 # - nominal_<task>: sweeps/nominal.yaml on the tasks in $NOMINAL ("TASK:SEEDS:JOBS", default Pendulum:50:10
-#   Cartpole:20:10).
+#   Cartpole:20:6).
 # Every BayesSim fit runs on a GPU (device=cuda, round robin), every simulation natively on $THREADS threads.
 # `collect` tars the run directories' results into $OUT/real_robot_studies.tar.gz and prints
 # benchmarks/real_robot_rounds.py's table of each sweep (what each round proposed from, its guard, the gain at the truth).
@@ -47,16 +47,17 @@ sweep() {  # sweep NAME ARGS...: a --multirun into $WORK/NAME, fitting on the ne
 masses=$("$PY" -c "from bayessim_exp.api import compose
 print(' '.join(f'task.real_params.{n}=1.0' for n in compose(['task=ShadowHand']).task.parameters if n.startswith('mass_')))")
 
-for escape in ${ESCAPES:-linear nearest posterior}; do
+for escape in ${ESCAPES:-linear both}; do
     sweep "franka_$escape" task=FrankaCabinet seed=0,1,2 "method.escape=$escape" device=cuda sim=native \
         "sim.nthread=$THREADS" hydra.launcher.n_jobs=3
     # shellcheck disable=SC2086
     sweep "shadow_$escape" task=ShadowHand $masses seed=0,1,2 "method.escape=$escape" device=cuda sim=native \
         "sim.nthread=$THREADS" hydra.launcher.n_jobs=3
 done
-sweep mission_gpu task=ShadowHand summarizer=signatory summarizer.backend=torch device=cuda seed=0 hydra.launcher.n_jobs=1
-sweep mission_cpu task=ShadowHand summarizer=signatory sim=native sim.nthread=4 seed=0 hydra.launcher.n_jobs=1
-for study in ${NOMINAL:-Pendulum:50:10 Cartpole:20:10}; do
+sweep mission_gpu task=ShadowHand summarizer=signatory device=cuda seed=0 hydra.launcher.n_jobs=1
+OMP_NUM_THREADS=${MISSION_THREADS:-6} sweep mission_cpu task=ShadowHand summarizer=signatory sim=native \
+    "sim.nthread=${MISSION_THREADS:-6}" seed=0 hydra.launcher.n_jobs=1
+for study in ${NOMINAL:-Pendulum:50:8 Cartpole:20:6}; do
     IFS=: read -r task seeds jobs <<<"$study"
     sweep "nominal_$task" --config-dir sweeps --config-name nominal "task=$task" "seed=range($seeds)" device=cuda \
         sim=native sim.nthread=1 "hydra.launcher.n_jobs=$jobs"

@@ -10,7 +10,7 @@
 # - franka_<escape>: FrankaCabinet at its own real_params (BayesSimIG's robot, in the prior's joint tail), seeds 0-2;
 # - shadow_<escape>: ShadowHand with every link mass at the MJCF's value (multiplier 1: what a real hand most likely
 #   is, |u|^2 = 43 in probit space against 24 for a typical prior draw), its other real_params, seeds 0-2;
-#   both once per method.escape in $ESCAPES (default: linear both);
+#   both once per method.escape in $ESCAPES (default: linear nearest);
 # - mission_gpu, mission_cpu: the mission's command `task=ShadowHand summarizer=signatory`, on the GPU (sim=auto, the
 #   default pysiglib) and on native MuJoCo with device=cpu ($MISSION_THREADS threads for simulation and fit, default 6);
 # - nominal_<task>: sweeps/nominal.yaml on the tasks in $NOMINAL ("TASK:SEEDS:JOBS", default Pendulum:50:10
@@ -47,7 +47,7 @@ sweep() {  # sweep NAME ARGS...: a --multirun into $WORK/NAME, fitting on the ne
 masses=$("$PY" -c "from bayessim_exp.api import compose
 print(' '.join(f'task.real_params.{n}=1.0' for n in compose(['task=ShadowHand']).task.parameters if n.startswith('mass_')))")
 
-for escape in ${ESCAPES:-linear both}; do
+for escape in ${ESCAPES:-linear nearest}; do
     sweep "franka_$escape" task=FrankaCabinet seed=0,1,2 "method.escape=$escape" device=cuda sim=native \
         "sim.nthread=$THREADS" hydra.launcher.n_jobs=3
     # shellcheck disable=SC2086

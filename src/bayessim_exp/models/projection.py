@@ -30,6 +30,7 @@ class RidgeSystem:
         self.design = torch.cat([z.double(), torch.ones(len(z), 1, dtype=torch.float64, device=z.device)], 1)
         self.y = y.double()
         self.dual = z.shape[1] > len(z)
+        self._kernel = None  # the dual's centred kernel of all rows, shared by every penalty
         if not self.dual:
             self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
 
@@ -49,15 +50,26 @@ class RidgeSystem:
         z, y = self.design[:, :-1], self.y
         if leave_out is not None:
             z, y = z[~leave_out], y[~leave_out]
-        z_mean, y_mean = z.mean(0), y.mean(0)
-        zc = z - z_mean
-        kernel = zc @ zc.T
-        kernel.diagonal().add_(penalty)
-        w = zc.T @ torch.linalg.solve(kernel, y - y_mean)
+            centred = _centred_kernel(z, y)
+        else:  # formed once (rows^2 x features: the dual's cost), not once per penalty
+            if self._kernel is None:
+                self._kernel = _centred_kernel(z, y)
+            centred = self._kernel
+        zc, kernel, z_mean, y_mean = centred
+        # positive definite for any penalty > 0: Cholesky, half the work of a general solve
+        factor = torch.linalg.cholesky(kernel + penalty * torch.eye(len(kernel), dtype=kernel.dtype, device=kernel.device))
+        w = zc.T @ torch.cholesky_solve(y - y_mean, factor)
         return torch.cat([w, (y_mean - z_mean @ w)[None]])
 
     def predict(self, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
         return self.design[rows] @ weights
+
+
+def _centred_kernel(z: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """(zc, zc zc^T, z's column means, y's column means) of rows z, y centred by their means."""
+    z_mean = z.mean(0)
+    zc = z - z_mean
+    return zc, zc @ zc.T, z_mean, y.mean(0)
 
 
 class RidgeProjection(nn.Module):

@@ -40,7 +40,7 @@ from .base import Policy, Simulator, broke_down
 from .mjx_impl import IMPLS, implementation, resolve_impl
 from .mjx_setup import import_mjx, jax_setup
 from .mjx_tuning import check_tuning, native_measured_faster
-from .native import NativeConfig, NativeSimulator
+from .native import NativeConfig, NativeSimulator, simulation_threads
 from .trace_cache import ExportedJit, code_fingerprint, program_key
 from .trajectories import Trajectories
 
@@ -60,7 +60,7 @@ _LOGGED: set[tuple] = set()  # (task, implementation) and (task, constants on th
 class MjxConfig:
     max_abs_qvel: float  # a joint speed beyond this counts as diverged
     cache_dir: Any  # JAX's persistent compilation cache and the traced programs (str), or None: off
-    nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: all)
+    nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: the process's CPUs)
     native_below: int  # batches smaller than this run on native MuJoCo (the tuned model) on CPU threads
     impl: str  # jax, warp, or auto: warp where warp-lang is installed and the GPU is NVIDIA's
     tuning: dict[str, Any]  # the task's model tuned for MJX (mjx_tuning.py; conf/mjx_tuning/<task>.yaml)
@@ -121,7 +121,7 @@ class MjxSimulator(Simulator):
             _LOGGED.add((task.name, tuple(on_host)))
             log.info("sim=mjx %s: constants computed on the host by mujoco.batch's set_const: %s", task.name,
                      "; ".join(f"{n} ({why})" for n, why in on_host.items()))
-        self._setconst = mjbatch.Batch(m, num_envs, nthread=cfg.nthread) if on_host else None
+        self._setconst = mjbatch.Batch(m, num_envs, nthread=simulation_threads(cfg.nthread)) if on_host else None
         # host copies [N, ...] of the constants computed there; resets write rows and upload the whole leaf
         self._host = {n: np.repeat(np.asarray(model_field(self.nominal, n))[None], num_envs, 0) for n in on_host}
         self._constants = DeviceConstants(m, mjx.make_data(self._jax_nominal),

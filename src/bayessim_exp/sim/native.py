@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import types
 
 import mujoco
@@ -21,9 +22,16 @@ _DIVERGENCE_WARNINGS = [
 ]
 
 
+def simulation_threads(nthread: int) -> int:
+    """nthread, or for 0 the CPUs this process may run on: its affinity (a Slurm job's share, a pinned test
+    worker's), not the machine's count that mujoco.batch's own 0 means (64 threads in each of 8 processes on a
+    64-core machine)."""
+    return nthread or len(os.sched_getaffinity(0))
+
+
 @dataclasses.dataclass
 class NativeConfig:
-    nthread: int  # 0: all CPUs
+    nthread: int  # 0: the CPUs this process may run on
     max_abs_qvel: float  # a joint speed beyond this counts as diverged
 
     def validate(self) -> None:
@@ -38,7 +46,7 @@ class NativeSimulator(Simulator):
         super().__init__(task, num_envs)
         self.cfg = cfg
         self.model = task.model if model is None else model
-        self.batch = mjbatch.Batch(self.model, num_envs, nthread=cfg.nthread)
+        self.batch = mjbatch.Batch(self.model, num_envs, nthread=simulation_threads(cfg.nthread))
         derived = [f for f in task.data_fields if f not in ("qpos", "qvel", "act", "time")]
         self._stage = mujoco.mjtStage.mjSTAGE_VEL if derived else mujoco.mjtStage.mjSTAGE_NONE
         for field in task.data_fields:  # outputs are copied out only after calls made once they are bound

@@ -13,9 +13,6 @@ summaries to its parameters (each coordinate's penalty by its error on the held-
 - `linear`: the regression read at the real data, its held-out error covariance times INFLATE. It extrapolates:
   on FrankaCabinet the next round's simulations surrounded the real data, on ShadowHand it put the palm's mass on
   the box's face (0.1 for 1.0) and the next round's posterior missed the truth behind a guard that passed;
-- `both`: the two reads' regions together (an equal mixture of their Gaussians): the next round simulates where the
-  linear read extrapolates to and where the simulations lead, so a wrong extrapolation still leaves simulations on
-  the way to the real data;
 - `posterior`: the round's own posterior, whose mixture network collapses onto the box's faces out there (Cartpole
   with its parameters at 1-5 % of their ranges: cart mass 0.314 +- 0.006 for 0.4);
 - `none`: what the round proposed from, as after a failure of the model itself.
@@ -30,7 +27,7 @@ import torch
 from ...models.base import constant_columns
 from ...models.projection import RidgeSystem
 
-READS = ("linear", "nearest", "both")  # the escapes that read Gaussians off the real data
+READS = ("linear", "nearest")  # the escapes that read a Gaussian off the real data
 ESCAPES = (*READS, "posterior", "none")
 NEAREST = 0.02  # the share of the fitted simulations whose linear reads lie nearest the real data's (nearest)
 PENALTIES = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5)  # on standardised summaries, each parameter's by held-out error
@@ -41,12 +38,11 @@ MAX_ROWS = 4096
 
 
 def read_at(x_fit: torch.Tensor, u_fit: torch.Tensor, x_check: torch.Tensor, u_check: torch.Tensor,
-            x_real: torch.Tensor, escape: str, inflate: float = INFLATE) -> tuple[torch.Tensor, torch.Tensor]:
-    """(means [K, D], covariances [K, D, D]) of the Gaussians over the parameters u the real summaries x_real [n, F]
-    point to, one per read of `escape` (one of READS). The ridge regression is fitted on the last MAX_ROWS of
-    (x_fit [N, F], u_fit [N, D]), each coordinate's penalty and the error covariance taken on (x_check, u_check), and
-    read at the mean of the n real summaries' predictions (`linear`); `nearest` takes the mean and covariance of the
-    fitted simulations whose reads lie nearest that one instead; `both` gives the two."""
+            x_real: torch.Tensor, inflate: float = INFLATE, nearest: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    """(mean [D], covariance [D, D]) of the parameters u the real summaries x_real [n, F] point to: the ridge
+    regression fitted on the last MAX_ROWS of (x_fit [N, F], u_fit [N, D]), each coordinate's penalty and the error
+    covariance taken on (x_check, u_check), read at the mean of the n real summaries' predictions (`linear`); with
+    `nearest`, the mean and covariance of the fitted simulations whose reads lie nearest that one instead."""
     x_fit, u_fit = x_fit[-MAX_ROWS:].double(), u_fit[-MAX_ROWS:].double()
     varying = ~constant_columns(x_fit)
     mean, std = x_fit[:, varying].mean(0), x_fit[:, varying].std(0)
@@ -62,14 +58,9 @@ def read_at(x_fit: torch.Tensor, u_fit: torch.Tensor, x_check: torch.Tensor, u_c
     columns = torch.arange(u_fit.shape[1])
     errors = u_check.double() - check[best, :, columns].T
     read = (design(x_real) @ weights)[best, :, columns].T.mean(0)
-    gaussians = []
-    if escape in ("linear", "both"):
-        gaussians.append((read, torch.atleast_2d(torch.cov(errors.T))))
-    if escape in ("nearest", "both"):
-        reads = (design(x_fit) @ weights)[best, :, columns].T
-        distance = ((reads - read) / reads.std(0).clamp_min(1e-12)).pow(2).sum(1)
-        near = u_fit[distance.argsort()[:max(2 * u_fit.shape[1], int(NEAREST * len(u_fit)))]]
-        gaussians.append((near.mean(0), torch.atleast_2d(torch.cov(near.T))))
-    if not gaussians:
-        raise ValueError(f"escape={escape!r} reads nothing; the reads are {', '.join(READS)}")
-    return torch.stack([m for m, _ in gaussians]), inflate * torch.stack([c for _, c in gaussians])
+    if not nearest:
+        return read, inflate * torch.atleast_2d(torch.cov(errors.T))
+    reads = (design(x_fit) @ weights)[best, :, columns].T
+    distance = ((reads - read) / reads.std(0).clamp_min(1e-12)).pow(2).sum(1)
+    near = u_fit[distance.argsort()[:max(2 * u_fit.shape[1], int(NEAREST * len(u_fit)))]]
+    return near.mean(0), inflate * torch.atleast_2d(torch.cov(near.T))

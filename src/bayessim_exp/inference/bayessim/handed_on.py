@@ -10,14 +10,13 @@ import dataclasses
 from ...distributions.base import ParameterDistribution
 from ...stages import RoundContext
 
-_READS = {"linear": "linear read of its real data", "nearest": "simulations nearest its real data",
-          "both": "linear read of its real data and simulations nearest it"}
+_READS = {"linear": "linear read of its real data", "nearest": "simulations nearest its real data"}
 
 
 @dataclasses.dataclass(frozen=True)
 class ProposalSource:
     """What a round's proposal is built from: round `round`'s posterior (0: the prior), or with `read` (escape.py's
-    linear | nearest | both) the Gaussians that round read off its real data, kept in its guard's artifact."""
+    linear | nearest) the Gaussian that round read off its real data, kept in its guard's artifact."""
 
     round: int = 0
     read: str | None = None

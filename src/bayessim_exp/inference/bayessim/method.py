@@ -379,15 +379,13 @@ class BayesSim(InferenceMethod):
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         mean, cov = read_at(torch.cat([d[1] for d in data]), self._fitted_space(torch.cat([d[0] for d in data])),
                             data[-1][3], self._fitted_space(data[-1][2]),
-                            ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]), self.cfg.escape)
+                            ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]),
+                            nearest=self.cfg.escape == "nearest")
         return {"mean": mean, "cov": cov}
 
     def _read_distribution(self, read: dict) -> ParameterDistribution:
-        """The read's Gaussians as an equal mixture, in parameter units: mapped back from probit space, or truncated to
-        the box. (A run made before `both` existed kept one Gaussian: mean [D], covariance [D, D].)"""
-        dim = read["mean"].shape[-1]
-        means, covs = read["mean"].reshape(-1, dim), read["cov"].reshape(-1, dim, dim)
-        gaussian = GaussianMixture(torch.zeros(len(means)), means, covs)
+        """The Gaussian of a read, in parameter units: mapped back from probit space, or truncated to the box."""
+        gaussian = GaussianMixture(torch.zeros(1), read["mean"][None], read["cov"][None])
         if self.probit is not None:
             return ProbitPosterior(gaussian, self.probit)
         return TruncatedMixture(gaussian, self.inputs.prior.low, self.inputs.prior.high)

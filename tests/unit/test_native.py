@@ -114,3 +114,16 @@ def test_first_observation_after_reset_reads_derived_fields():
     sim = native(Marker(cfg), 2)
     obs = sim.reset(np.ones((2, 1)), None, seed=0)
     np.testing.assert_allclose(obs[:, 0], 1.5)  # site_xpos computed at the reset state, not zeros
+
+
+def test_zero_threads_are_the_cpus_this_process_may_run_on(pendulum):
+    """sim.nthread=0 simulates on the process's CPUs (its affinity: a Slurm job's share, a pinned test worker's),
+    not on every CPU of the machine as mujoco.batch's own 0 would; a positive count is taken as given (mujoco.batch
+    caps either at the number of simulations)."""
+    import os
+
+    from bayessim_exp.sim.native import NativeConfig, NativeSimulator
+
+    cpus = len(os.sched_getaffinity(0))
+    assert NativeSimulator(pendulum, 256, NativeConfig(nthread=0, max_abs_qvel=1e4)).batch.nthread == min(cpus, 256)
+    assert NativeSimulator(pendulum, 8, NativeConfig(nthread=3, max_abs_qvel=1e4)).batch.nthread == 3

@@ -9,6 +9,8 @@
 # Steps:
 #   tests        the MJX tests (whole files: they are marked slow, so no -k "not slow") and the GPU model tests;
 #                fails unless tests of test_mjx.py and test_mjx_constants.py really passed
+#   suite        make test's CPU lane (-m "not mjx") on the machine's CPUs, $SUITE_JOBS workers (default 8), run alone:
+#                beside the real-robot studies on 2026-11-27 the load average passed 300 (issue 45)
 #   model_fit    python benchmarks/model_fit.py --epochs 10
 #   default_run  python benchmarks/default_run.py: `device=cuda` ($REPS timed runs after one warm-up), then
 #                `device=cpu sim=native` (one run)
@@ -141,6 +143,13 @@ for case in ET.parse(sys.argv[1]).iter("testcase"):
 print("MJX against native MuJoCo, cases passed:", passed)
 sys.exit(0 if all(passed.values()) else 1)
 EOF
+}
+
+# issue 45: the CPU lane of `make test` on this machine's CPUs (another CPU model than the development machine's),
+# $SUITE_JOBS workers (default 8), each pinned by tests/conftest.py to its share of the CPUs; failures listed at the end
+step_suite() {
+    OMP_NUM_THREADS=1 "$PY" -m pytest -q -rfEs -p no:cacheprovider -n "${SUITE_JOBS:-8}" --dist loadgroup \
+        --no-loadscope-reorder --max-worker-restart=0 -m "not mjx" tests
 }
 
 step_model_fit() { "$PY" benchmarks/model_fit.py --epochs 10; }
@@ -298,7 +307,7 @@ failed=()
 for step in "$@"; do
     case $step in
         stash-warp) ;;
-        tests|model_fit|default_run|throughput|throughput16k|humanoid|auto_table|rl_gpu|rl_cpu|calibration|round_coverage|foreign|results|robots)
+        tests|suite|model_fit|default_run|throughput|throughput16k|humanoid|auto_table|rl_gpu|rl_cpu|calibration|round_coverage|foreign|results|robots)
             run_step "$step" || failed+=("$step") ;;
         *) say "unknown step: $step"; failed+=("$step") ;;
     esac

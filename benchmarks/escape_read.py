@@ -43,7 +43,7 @@ def main() -> None:
     now = timed(lambda: escape.read_at(x[fit], u[fit], x[check], u[check], x_real, nearest=True))
     z = (x[fit].double() - x[fit].double().mean(0)) / x[fit].double().std(0)
     baseline = timed(lambda: [RidgeSystem(z, u[fit]).solve(p) for p in escape.PENALTIES])
-    print(f"| rows | features | parameters | read_at s | baseline: kernel per penalty, ridge alone s | speed-up |")
+    print("| rows | features | parameters | read_at s | baseline: kernel per penalty, ridge alone s | speed-up |")
     print("|---|---|---|---|---|---|")
     print(f"| {args.rows} | {args.features} | {args.params} | {now:.1f} | {baseline:.1f} | {baseline / now:.1f}x |")
 

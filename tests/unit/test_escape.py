@@ -1,7 +1,6 @@
 """The escapes' reads (inference/bayessim/escape.py) on a linear simulator whose real data lie beyond its
 simulations: `linear` extrapolates to the truth, `nearest` steps toward it from inside the simulations."""
 
-import pytest
 import torch
 
 from bayessim_exp.inference.bayessim.escape import INFLATE, read_at

@@ -24,6 +24,8 @@ def _pin_worker() -> None:
     (the process's CPUs, sim/native.py) add up to the machine, not to workers times CPUs: 8 workers on a 64-core
     machine ran 500-800 threads each, a load average above 300."""
     worker, count = os.environ.get("PYTEST_XDIST_WORKER"), int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0"))
+    if not hasattr(os, "sched_setaffinity"):  # Linux only
+        return
     cpus = sorted(os.sched_getaffinity(0))
     share = len(cpus) // count if worker and count else 0
     if share:

@@ -26,7 +26,10 @@ def simulation_threads(nthread: int) -> int:
     """nthread, or for 0 the CPUs this process may run on: its affinity (a Slurm job's share, a pinned test
     worker's), not the machine's count that mujoco.batch's own 0 means (64 threads in each of 8 processes on a
     64-core machine)."""
-    return nthread or len(os.sched_getaffinity(0))
+    if nthread:
+        return nthread
+    # macOS and Windows have no affinity call: every CPU there
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 @dataclasses.dataclass

@@ -29,7 +29,7 @@ def _pin_worker() -> None:
     cpus = sorted(os.sched_getaffinity(0))
     share = len(cpus) // count if worker and count else 0
     if share:
-        index = int(worker.removeprefix("gw")) % count
+        index = int(worker.removeprefix("gw"))
         os.sched_setaffinity(0, cpus[index * share:(index + 1) * share])
 
 

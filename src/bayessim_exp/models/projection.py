@@ -23,14 +23,15 @@ class RidgeSystem:
     With more rows than features, the normal equations are formed once and a fold's Gram matrix is
     subtracted rather than recomputed. With more features than rows (signature summaries give thousands),
     the same weights come from the dual: on data centred by the fitted rows' means (which makes the
-    intercept unpenalised), w = Zc^T (Zc Zc^T + penalty I)^-1 Yc, a rows-by-rows system.
+    intercept unpenalised), w = Zc^T (Zc Zc^T + penalty I)^-1 Yc, a rows-by-rows system whose kernel every
+    penalty and fold takes from one Gram matrix of all rows.
     """
 
     def __init__(self, z: torch.Tensor, y: torch.Tensor):
         self.design = torch.cat([z.double(), torch.ones(len(z), 1, dtype=torch.float64, device=z.device)], 1)
         self.y = y.double()
         self.dual = z.shape[1] > len(z)
-        self._kernel = None  # the dual's centred kernel of all rows, shared by every penalty
+        self._gram = None  # the dual's z z^T over all rows (formed at its first solve)
         if not self.dual:
             self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
 
@@ -47,29 +48,25 @@ class RidgeSystem:
         return torch.linalg.solve(gram + torch.diag(reg), moment)
 
     def _solve_dual(self, penalty: float, leave_out: torch.Tensor | None) -> torch.Tensor:
-        z, y = self.design[:, :-1], self.y
+        if self._gram is None:  # rows^2 x features: the dual's cost, paid once
+            z_all = self.design[:, :-1]
+            self._gram = z_all @ z_all.T
+        z, y, gram = self.design[:, :-1], self.y, self._gram
         if leave_out is not None:
-            z, y = z[~leave_out], y[~leave_out]
-            centred = _centred_kernel(z, y)
-        else:  # formed once (rows^2 x features: the dual's cost), not once per penalty
-            if self._kernel is None:
-                self._kernel = _centred_kernel(z, y)
-            centred = self._kernel
-        zc, kernel, z_mean, y_mean = centred
+            keep = ~leave_out
+            z, y, gram = z[keep], y[keep], gram[keep][:, keep]
+        z_mean, y_mean = z.mean(0), y.mean(0)
+        # the centred rows' kernel (z - mean)(z - mean)^T from the Gram by double centring
+        row = gram.mean(1, keepdim=True)
+        kernel = gram - row - row.T + gram.mean()
         # positive definite for any penalty > 0: Cholesky, half the work of a general solve
         factor = torch.linalg.cholesky(kernel + penalty * torch.eye(len(kernel), dtype=kernel.dtype, device=kernel.device))
-        w = zc.T @ torch.cholesky_solve(y - y_mean, factor)
+        alpha = torch.cholesky_solve(y - y_mean, factor)
+        w = z.T @ alpha - z_mean[:, None] * alpha.sum(0)  # (z - mean)^T alpha without the centred copy of z
         return torch.cat([w, (y_mean - z_mean @ w)[None]])
 
     def predict(self, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
         return self.design[rows] @ weights
-
-
-def _centred_kernel(z: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, ...]:
-    """(zc, zc zc^T, z's column means, y's column means) of rows z, y centred by their means."""
-    z_mean = z.mean(0)
-    zc = z - z_mean
-    return zc, zc @ zc.T, z_mean, y.mean(0)
 
 
 class RidgeProjection(nn.Module):

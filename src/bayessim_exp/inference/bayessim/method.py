@@ -42,7 +42,7 @@ from .model_checks import coverage_near_real, extrapolation
 from .parameter_space import PARAMETER_SPACES, probit_transform
 from .proposals import ProposalInputs, proposal_named
 from .replay_tempering import temper_to_replays
-from .set_calibration import simulated_sets_temperature
+from .set_calibration import set_importance_draws, simulated_sets_temperature
 from .simulate import predictive_summaries, simulate_as_driven, without_noise
 from .training_data import exact_training_rows, held_out_count, split, summarized
 
@@ -263,18 +263,21 @@ class BayesSim(InferenceMethod):
         seed = stage_seed(ctx.run_seed, ctx.round, "product_temperature")  # its own stream, as the checks'
         tau, record = simulated_sets_temperature(
             theta, n, lambda theta_sets: self._simulate(ctx, theta_sets, seed),
-            lambda x_set: self._tempered_product(ctx, [model.conditional(x_i.float()) for x_i in x_set]),
+            lambda x_set: self._tempered_product(ctx, [model.conditional(x_i.float()) for x_i in x_set],
+                                                 set_importance_draws(self.cfg.importance_draws, d.coverage_samples)),
             d.levels, d.coverage_samples, seed)
         if tau < 1:
             log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
                      ctx.round, n, tau, record["sets"])
         return tau, record
 
-    def _tempered_product(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
+    def _tempered_product(self, ctx: RoundContext, conditionals: list,
+                          importance_draws: int) -> Callable[[float], ParameterDistribution]:
         """The posterior given trajectories' per-trajectory posteriors, combined as the product tempered to the
-        temperature it is called with (their product computed once)."""
+        temperature it is called with (their product computed once); `importance_draws` where it has no closed
+        form."""
         return tempered_product(conditionals, self.inputs.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
-                                self.probit, self.cfg.importance_draws)
+                                self.probit, importance_draws)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
         return simulate_as_driven(self.inputs.sims, self.inputs.policy(seed, ctx), theta, self.inputs.rc.collect.horizon,
@@ -325,7 +328,9 @@ class BayesSim(InferenceMethod):
         tau, _ = self._product_temperature(ctx, model, len(x_real) + 1)
         seed = stage_seed(ctx.run_seed, ctx.round, "local_coverage")
         return {**coverage_near_real(model, x_real, lambda theta: self._simulate(ctx, theta, seed),
-                                     lambda conditionals: self._tempered_product(ctx, conditionals)(tau),
+                                     lambda conditionals: self._tempered_product(
+                                         ctx, conditionals, set_importance_draws(self.cfg.importance_draws,
+                                                                                 d.coverage_samples))(tau),
                                      d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:

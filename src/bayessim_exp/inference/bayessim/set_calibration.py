@@ -30,6 +30,16 @@ from ...distributions.hpd import own_level, shares_inside
 
 COARSE = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
 _FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the best coarse one
+# A set's posterior without a closed form is importance-sampled (correction.py) at every temperature tried: its pool
+# only has to give the `draws` that locate the set's own parameters, so it is this many times `draws` (a pool of
+# method.importance_draws for each of some thousand sets and temperatures was most of a round's time: docs/benchmarks.md).
+POOL_PER_DRAW = 20
+
+
+def set_importance_draws(importance_draws: int, draws: int) -> int:
+    """The importance pool of a simulated set's posterior: POOL_PER_DRAW x the `draws` read from it, at most the
+    real data's `importance_draws`."""
+    return min(importance_draws, POOL_PER_DRAW * draws)
 
 
 def miscalibration(levels_of_sets: torch.Tensor, levels: Sequence[float]) -> float:

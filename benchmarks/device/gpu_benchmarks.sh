@@ -149,7 +149,7 @@ EOF
 # $SUITE_JOBS workers (default 8), each pinned by tests/conftest.py to its share of the CPUs; failures listed at the end
 step_suite() {
     OMP_NUM_THREADS=1 "$PY" -m pytest -q -rfEs -p no:cacheprovider -n "${SUITE_JOBS:-8}" --dist loadgroup \
-        --no-loadscope-reorder --max-worker-restart=0 -m "not mjx" tests
+        --no-loadscope-reorder --max-worker-restart=0 --durations=60 -m "not mjx" tests
 }
 
 step_model_fit() { "$PY" benchmarks/model_fit.py --epochs 10; }

@@ -45,15 +45,16 @@ def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components:
 
 def tempered_product(conditionals: list, prior, max_components: int = MAX_COMPONENTS, proposal=None, seed: int = 0,
                      probit: ProbitTransform | None = None,
-                     importance_draws: int = IMPORTANCE_DRAWS) -> Callable[[float], ParameterDistribution]:
+                     importance_draws: int = IMPORTANCE_DRAWS,
+                     warn: bool = True) -> Callable[[float], ParameterDistribution]:
     """The posterior given the model's per-trajectory posteriors q(theta | x_i), combined as their product with
     the likelihood ratios raised to a temperature, as a function of the temperature (correction.py's
-    tempered_posterior: the product is computed once however many temperatures are asked for)."""
+    tempered_posterior: the product is computed once however many temperatures are asked for; `warn` as there)."""
     if probit is None:
         return tempered_posterior(conditionals, prior, proposal, max_components=max_components, seed=seed,
-                                  importance_draws=importance_draws)
+                                  importance_draws=importance_draws, warn=warn)
     at = tempered_posterior(conditionals, standard_normal_prior(probit.dim), _probit_proposal(proposal, prior),
-                            max_components=max_components, seed=seed, importance_draws=importance_draws)
+                            max_components=max_components, seed=seed, importance_draws=importance_draws, warn=warn)
     return lambda temperature: ProbitPosterior(at(temperature), probit)
 
 

@@ -161,10 +161,12 @@ def posterior(conditionals: Sequence, prior, proposal=None, *, max_components: i
 
 
 def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_components: int = MAX_COMPONENTS,
-                       seed: int = 0, importance_draws: int = IMPORTANCE_DRAWS) -> Callable[[float], ParameterDistribution]:
+                       seed: int = 0, importance_draws: int = IMPORTANCE_DRAWS,
+                       warn: bool = True) -> Callable[[float], ParameterDistribution]:
     """`posterior` as a function of the temperature, for callers that need it at several: the product of the
     conditionals, which no temperature changes (the power is applied to it), is computed once, at the first
-    call that needs it."""
+    call that needs it. warn=False logs an importance-sampled result at debug level (simulated sets: a
+    thousand of them a round)."""
     n = len(conditionals)
     if n == 0:
         raise ValueError("posterior needs at least one real summary")
@@ -223,8 +225,8 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
         parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
         log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected, tau)
         result = ImportancePosterior(log_target, DefensiveMixture(parts), num=importance_draws, seed=seed)
-        log.warning("posterior: no closed form (%s); using importance sampling with %d draws, effective sample "
-                    "size %.0f", reason, importance_draws, result.ess)
+        log.log(logging.WARNING if warn else logging.DEBUG, "posterior: no closed form (%s); using importance "
+                "sampling with %d draws, effective sample size %.0f", reason, importance_draws, result.ess)
         return result
 
     return at

@@ -263,21 +263,20 @@ class BayesSim(InferenceMethod):
         seed = stage_seed(ctx.run_seed, ctx.round, "product_temperature")  # its own stream, as the checks'
         tau, record = simulated_sets_temperature(
             theta, n, lambda theta_sets: self._simulate(ctx, theta_sets, seed),
-            lambda x_set: self._tempered_product(ctx, [model.conditional(x_i.float()) for x_i in x_set],
-                                                 set_importance_draws(self.cfg.importance_draws, d.coverage_samples)),
+            lambda x_set: self._simulated_set_product(ctx, [model.conditional(x_i.float()) for x_i in x_set]),
             d.levels, d.coverage_samples, seed)
         if tau < 1:
             log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
                      ctx.round, n, tau, record["sets"])
         return tau, record
 
-    def _tempered_product(self, ctx: RoundContext, conditionals: list,
-                          importance_draws: int) -> Callable[[float], ParameterDistribution]:
-        """The posterior given trajectories' per-trajectory posteriors, combined as the product tempered to the
-        temperature it is called with (their product computed once); `importance_draws` where it has no closed
-        form."""
+    def _simulated_set_product(self, ctx: RoundContext, conditionals: list) -> Callable[[float], ParameterDistribution]:
+        """The posterior given a simulated set's per-trajectory posteriors, combined as the real set's are: their
+        product tempered to the temperature it is called with (computed once); where it has no closed form, an
+        importance pool of set_calibration.set_importance_draws, without a warning per set."""
+        draws = set_importance_draws(self.cfg.importance_draws, self.inputs.rc.diagnostics.coverage_samples)
         return tempered_product(conditionals, self.inputs.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
-                                self.probit, importance_draws)
+                                self.probit, draws, warn=False)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
         return simulate_as_driven(self.inputs.sims, self.inputs.policy(seed, ctx), theta, self.inputs.rc.collect.horizon,
@@ -328,9 +327,7 @@ class BayesSim(InferenceMethod):
         tau, _ = self._product_temperature(ctx, model, len(x_real) + 1)
         seed = stage_seed(ctx.run_seed, ctx.round, "local_coverage")
         return {**coverage_near_real(model, x_real, lambda theta: self._simulate(ctx, theta, seed),
-                                     lambda conditionals: self._tempered_product(
-                                         ctx, conditionals, set_importance_draws(self.cfg.importance_draws,
-                                                                                 d.coverage_samples))(tau),
+                                     lambda conditionals: self._simulated_set_product(ctx, conditionals)(tau),
                                      d.local_sets, d.levels, d.coverage_samples, seed), "temperature": tau}
 
     def _predictive(self, ctx: RoundContext, posterior, x_real: torch.Tensor) -> dict | None:

@@ -121,7 +121,7 @@ def best_fit(sims, real, steps: int) -> np.ndarray:
 
     def cost(theta: torch.Tensor) -> torch.Tensor:
         which = torch.arange(n).repeat(len(theta))
-        out = replay(sims, theta.repeat_interleave(n, 0), real, which).states.double()
+        out = replay(sims, theta.repeat_interleave(n, 0), real, which).states.cpu().double()  # MJX: on the GPU
         return (out - real.states.double()[which]).reshape(len(theta), -1).pow(2).sum(1)
 
     low, high = sims.task.spec.low, sims.task.spec.high

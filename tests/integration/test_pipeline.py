@@ -358,6 +358,27 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
         assert results["rounds"][1]["proposal_from"] == "round 1's simulations nearest its real data"
 
 
+def test_a_truth_in_the_priors_tail_that_the_distance_misses_is_caught_by_the_features_outside_the_range(compose,
+                                                                                                        tmp_path):
+    """A Gaussian prior 12 standard deviations per box range (N(1.25, 0.125) x N(0.625, 0.0625)) and a real pendulum
+    5.6 and 5.2 of them out (0.55 kg, 0.3 m), without the replay widening (as a task that cannot replay): the
+    ridge predictions' distance misses it (p = 0.2, the summaries being far from linear in the parameters), and the
+    model's posterior puts the length at the prior's (0.61 +- 0.01: -1,741 nats at the truth before the guard read
+    the range check). Fourteen summary features lie outside the training simulations' range, more than in any
+    held-out simulation: the guard fails the round and domain randomization gets the prior."""
+    results = Pipeline(compose(["logging.progress=false", "rounds=1", "prior=gaussian", "prior.stds_per_range=12",
+                                "task.real_params.mass=0.55", "task.real_params.length=0.3", "seed=3",
+                                "method.replay_tempering=false", *SMALL_BUDGET]), tmp_path).run()
+    r = results["rounds"][0]
+    assert r["extrapolation"]["flagged"] == [], r["extrapolation"]  # the case the range check is there for
+    outside = r["mismatch"]["summaries_outside"]
+    assert outside["features_outside"][0] >= 5 and outside["p_value"][0] == pytest.approx(1 / (r["held_out"]["count"] + 1)), \
+        outside
+    assert r["guard"]["failed"] and r["guard"]["near_real_data_only"] and r["guard"]["handed_on"] == "the prior"
+    assert any("summary features outside the training simulations' range" in w for w in r["guard"]["warnings"])
+    assert r["log_prob_gain"] == 0.0
+
+
 def test_coverage_near_the_real_data_is_checked_where_asked(compose, tmp_path):
     """diagnostics.local_sets=60 (off by default: docs/statistics.md): every round records the shares of its
     posterior's draws inside their regions, at the temperature fitted for products of one more trajectory than

@@ -6,6 +6,7 @@ import math
 import pytest
 
 from bayessim_exp.diagnostics.guard import MIN_EFFECTIVE_SAMPLES, SAMPLING_Z, check_posterior, coverage_band
+from bayessim_exp.diagnostics.mismatch import flag_outside
 
 
 def test_a_calibrated_informative_posterior_passes():
@@ -84,6 +85,12 @@ def test_failures_where_the_real_data_lie_are_told_apart_from_the_models_own():
     simulations: more simulations there cure it (near_real_data_only); with a model failure beside it, not."""
     outside = check_posterior(2.0, {"0.9": 0.9}, count=1000, extrapolation=OUTSIDE)
     assert outside.failed and outside.near_real_data_only
+    beyond_range = check_posterior(2.0, {"0.9": 0.9}, count=1000, outside_range=flag_outside(
+        {"features_outside": [0, 14], "p_value": [1.0, 0.001]}, alpha=0.01))
+    assert beyond_range.failed and beyond_range.near_real_data_only and "[1] have [14] summary features" in \
+        beyond_range.warnings[0]
+    within = flag_outside({"features_outside": [2, 2], "p_value": [0.006, 0.006]}, alpha=0.01)  # 0.006 > 0.01 / 2
+    assert check_posterior(2.0, {"0.9": 0.9}, count=1000, outside_range=within).ok
     near = check_posterior(2.0, {"0.9": 0.9}, count=1000, local={"count": 100, "hpd": {"0.9": 0.5}})
     assert near.failed and near.near_real_data_only
     for model_failure in ({"mean_gain": -0.1}, {"coverage": {"0.9": 0.7}}, {"effective_samples": 10.0}):

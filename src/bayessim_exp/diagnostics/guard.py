@@ -13,9 +13,15 @@ Inputs are what every round measures on its held-out simulations (the last
 - the effective sample size of the posterior given the real data, where it is an importance-sampling
   estimate (no closed form): below MIN_EFFECTIVE_SAMPLES its density and draws rest on a handful of points;
 - where the real data lie among the simulations the model was trained on (extrapolation.py): a real summary
-  farther from them than all but a share alpha / n of the held-out simulations gets an extrapolated posterior
-  (BayesSim leaves this out where the real trajectories were replayed and the posterior widened by what the
-  replays leave unexplained: that measures the same difference near the posterior);
+  farther from them than all but a share alpha / n of the held-out simulations gets an extrapolated posterior;
+  and one with more summary features outside the training simulations' range than all but that share of the
+  held-out ones (mismatch.py's summaries_outside). The second sees what the first's ridge predictions can miss
+  where summaries are far from linear in the parameters: a pendulum whose length is 5 prior standard deviations
+  out put 2 to 14 features outside the range (p = 0.001) at distances of p = 0.06 to 0.2, and its posteriors
+  held the length at the prior's (-188 to -1741 nats at the truth; docs/benchmarks.md). Neither fired on the
+  foreign-dynamics benchmark's other integrators. (BayesSim leaves both out where the real trajectories were
+  replayed and the posterior widened by what the replays leave unexplained: that measures the same difference
+  near the posterior);
 - where asked (diagnostics.local_sets), the coverage where the real data put the posterior (local_coverage.py),
   in the same band as the held-out coverage: below it the model is off near the real data even if it is
   calibrated on average.
@@ -63,11 +69,12 @@ def coverage_band(level: float, count: int, tolerance: float = COVERAGE_TOLERANC
 def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, count: int,
                     baseline: str = "prior", effective_samples: float | None = None,
                     tolerance: float = COVERAGE_TOLERANCE, local: dict | None = None,
-                    extrapolation: dict | None = None) -> GuardReport:
+                    extrapolation: dict | None = None, outside_range: dict | None = None) -> GuardReport:
     """mean_gain: held-out mean log q - log of `baseline` (the round's proposal; nats); coverage: {level (str
     or float): fraction} of HPD regions on `count` held-out simulations; effective_samples: of an
     importance-sampled posterior (None: closed form); local: local_coverage's record; extrapolation:
-    inputs_outside's record. Any may be None (not measured)."""
+    inputs_outside's record; outside_range: summaries_outside's record with `flagged`, the real summaries
+    below its alpha / n. Any may be None (not measured)."""
     # failures on the model's own held-out simulations, and failures where the real data lie
     warnings, model_failed, near_real = [], False, False
     if mean_gain is not None and not (math.isfinite(mean_gain) and mean_gain > 0):  # infinite: a density of zero
@@ -112,6 +119,15 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
             "of the held-out simulations: the posterior there is an extrapolation. A real system in the joint tail "
             "of independent ranges (every mass scaled alike) needs a prior that holds it; else try more simulations, "
             "policy=replay with the real actions, or model.project_inputs=false")
+    if outside_range is not None and outside_range["flagged"]:
+        near_real = True
+        far = outside_range["flagged"]
+        warnings.append(
+            f"the real data lie outside the simulations the model was trained on: real trajectories {far} have "
+            f"{[outside_range['features_outside'][i] for i in far]} summary features outside the training "
+            f"simulations' range, more than all but {[outside_range['p_value'][i] for i in far]} of the held-out "
+            "simulations: the posterior there is an extrapolation. Try a prior that holds the real system, more "
+            "simulations, or policy=replay with the real actions")
     if effective_samples is not None and effective_samples < MIN_EFFECTIVE_SAMPLES:
         model_failed = True
         warnings.append(

@@ -35,12 +35,18 @@ def summaries_outside(x_real: torch.Tensor, x_train: torch.Tensor, x_held: torch
     return {"features_outside": counts.tolist(), "p_value": p_values}
 
 
+def flag_outside(outside: dict, alpha: float) -> dict:
+    """summaries_outside's record with `flagged`: the real summaries whose p-value is below alpha / n (Bonferroni
+    over the n real summaries); none with alpha 0."""
+    n = len(outside["p_value"])
+    return {**outside, "flagged": [i for i, p in enumerate(outside["p_value"]) if alpha > 0 and p < alpha / n]}
+
+
 def mismatch_report(round_index: int, outside: dict, replay: dict | None, dispersion: dict | None,
                     alpha: float) -> dict:
     """results.json's `mismatch` entry; logs a warning naming every sign found."""
     reasons = []
-    n = len(outside["p_value"])
-    far = [i for i, p in enumerate(outside["p_value"]) if p < alpha / n]
+    far = flag_outside(outside, alpha)["flagged"]
     if far:
         reasons.append(f"real summaries {far} have {[outside['features_outside'][i] for i in far]} features outside "
                        "the range of the simulated summaries")

@@ -70,7 +70,10 @@ class Trajectories:
 
     @staticmethod
     def cat(parts: list[Trajectories]) -> Trajectories:
+        """The rows of every part, each field on the first part's device for it: MJX keeps states on the GPU and
+        `diverged` on the CPU, and its fused and stepwise rollouts (policies with and without noise) differ."""
+        fields = [f.name for f in dataclasses.fields(Trajectories) if f.name != "dt"]
         return Trajectories(
-            *(torch.cat([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(Trajectories) if f.name != "dt"),
+            *(torch.cat([getattr(p, name).to(getattr(parts[0], name).device) for p in parts]) for name in fields),
             dt=parts[0].dt,
         )

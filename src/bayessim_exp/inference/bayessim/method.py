@@ -21,7 +21,7 @@ import torch
 from ...diagnostics.coverage import expected_coverage, held_out_gain
 from ...diagnostics.guard import ACTIONS, check_posterior
 from ...diagnostics.identifiability import linear_read, sensitivity
-from ...diagnostics.mismatch import mismatch_report, summaries_outside
+from ...diagnostics.mismatch import flag_outside, mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
 from ...diagnostics.replay import replay
 from ...diagnostics.replayed_check import replayed_check
@@ -355,7 +355,10 @@ class BayesSim(InferenceMethod):
         report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
                                  held_out.get("count", 0), baseline, conditioned["posterior"].effective_sample_size,
                                  local=checked.get("local_coverage"),
-                                 extrapolation=None if widened_by_replays else checked.get("extrapolation"))
+                                 extrapolation=None if widened_by_replays else checked.get("extrapolation"),
+                                 outside_range=None if widened_by_replays else flag_outside(
+                                     checked["mismatch"]["summaries_outside"],
+                                     self.inputs.rc.diagnostics.extrapolation_alpha))
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
         source, proposes, read = r, ProposalSource(r), None
         if action == "fallback":

@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-STAGES = ("collect", "fit", "model_check", "score")
+STAGES = ("collect", "summarize", "fit", "condition", "model_check", "guard", "score")
 
 
 def timed_run(overrides: list[str], src: str | None, run_dir: Path) -> dict:

@@ -6,8 +6,11 @@ docs/benchmarks.md's "Rounds that escape and focus" (benchmarks/device/real_robo
 Per sweep: one row per job (seed), per round `proposal source -> guard action (gain)`, where the source is the
 prior, a round's posterior, or what a round read off its real data (method.escape: its linear read, or the
 simulations nearest them) and `pass` / `fallback`
-is the guard's verdict; then the final gain at the truth and whether the run meets issue 44's acceptance: some
-round passed the guard, and no round after the first simulated from the prior.
+is the guard's verdict, marked `[range]` where a real summary has more features outside the round's training
+simulations' range than all but alpha / n of its held-out ones (the guard's range check since commit 9d7f36a,
+applied where no replay widening is; the records of earlier commits keep what it reads); then the final gain at the
+truth and whether the run meets issue 44's acceptance: some round passed the guard, and no round after the first
+simulated from the prior.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import argparse
 import statistics
 from pathlib import Path
 
+from bayessim_exp.diagnostics.mismatch import flag_outside
 from bayessim_exp.report.jobs import read_jobs
 
 _SHORT = {"the prior": "prior", "linear read of its real data": "read", "simulations nearest its real data": "near",
@@ -30,7 +34,12 @@ def _source(text: str) -> str:
     return f"r{number} {_SHORT.get(what, what)}"
 
 
-def rows(sweep: Path) -> list[str]:
+def _range_mark(r: dict, alpha: float) -> str:
+    outside = (r.get("mismatch") or {}).get("summaries_outside")
+    return " [range]" if outside and flag_outside(outside, alpha)["flagged"] else ""
+
+
+def rows(sweep: Path, alpha: float) -> list[str]:
     jobs = [j for j in read_jobs(sweep) if j.results and j.results["rounds"]]
     out = [f"### {sweep.name} ({len(jobs)} runs with a round)", "",
            "| seed | rounds: proposal from -> guard (gain at the truth) | final gain | a round passed | "
@@ -42,7 +51,7 @@ def rows(sweep: Path) -> list[str]:
         for r in rounds:
             verdict = "pass" if r["guard"]["action"] in ("none", "warn") else r["guard"]["action"]
             gain = r.get("log_prob_gain")
-            cells.append(f"{_source(r.get('proposal_from', '?'))} -> {verdict} "
+            cells.append(f"{_source(r.get('proposal_from', '?'))} -> {verdict}{_range_mark(r, alpha)} "
                          f"({'n/a' if gain is None else f'{gain:+.1f}'})")
         final = rounds[-1].get("log_prob_gain")
         finals.append(final)
@@ -60,8 +69,10 @@ def rows(sweep: Path) -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("sweeps", nargs="+", type=Path)
-    for sweep in parser.parse_args().sweeps:
-        print("\n".join(rows(sweep)))
+    parser.add_argument("--alpha", type=float, default=0.01, help="the range check's level (diagnostics.extrapolation_alpha)")
+    args = parser.parse_args()
+    for sweep in args.sweeps:
+        print("\n".join(rows(sweep, args.alpha)))
 
 
 if __name__ == "__main__":

@@ -42,14 +42,18 @@ class Adam:
                            amsgrad=False, maximize=False)
 
     def _single_tensor_step(self, live: list[int]) -> None:
+        """torch.optim.Adam's single-tensor arithmetic, each operation applied to every live tensor at once
+        (torch._foreach_*: the same values, one call per operation instead of one per tensor and operation)."""
         for i in live:
-            param, grad, exp_avg, exp_avg_sq = self.params[i], self.params[i].grad, self.exp_avg[i], self.exp_avg_sq[i]
             self.steps[i] += 1
-            bias_correction1 = 1 - BETA1 ** self.steps[i]
-            bias_correction2_sqrt = (1 - BETA2 ** self.steps[i]) ** 0.5
-            if self.weight_decay != 0:
-                grad = grad.add(param, alpha=self.weight_decay)
-            exp_avg.lerp_(grad, 1 - BETA1)
-            exp_avg_sq.mul_(BETA2).addcmul_(grad, grad, value=1 - BETA2)
-            denom = (exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(EPS)
-            param.addcdiv_(exp_avg, denom, value=-(self.lr / bias_correction1))
+        params, exp_avgs, exp_avg_sqs = ([group[i] for i in live] for group in (self.params, self.exp_avg, self.exp_avg_sq))
+        grads = [p.grad for p in params]
+        if self.weight_decay != 0:
+            grads = torch._foreach_add(grads, params, alpha=self.weight_decay)
+        torch._foreach_lerp_(exp_avgs, grads, 1 - BETA1)
+        torch._foreach_mul_(exp_avg_sqs, BETA2)
+        torch._foreach_addcmul_(exp_avg_sqs, grads, grads, value=1 - BETA2)
+        denoms = torch._foreach_sqrt(exp_avg_sqs)
+        torch._foreach_div_(denoms, [(1 - BETA2 ** self.steps[i]) ** 0.5 for i in live])
+        torch._foreach_add_(denoms, EPS)
+        torch._foreach_addcdiv_(params, exp_avgs, denoms, [-(self.lr / (1 - BETA1 ** self.steps[i])) for i in live])

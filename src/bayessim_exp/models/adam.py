@@ -1,9 +1,10 @@
 """Adam (Kingma & Ba 2015, L2 weight decay added to the gradient) without torch.optim.
 
 torch.optim imports torch._dynamo when an optimiser is built (its add_param_group is wrapped to stay
-out of compilation): seconds once per process (docs/benchmarks.md) for a run that never compiles. The arithmetic is torch.optim.Adam's: on a CPU its
-single-tensor path (identical results), on a GPU its fused kernel with the step counts on the device,
-so that the update can be captured in a CUDA graph.
+out of compilation): seconds once per process (docs/benchmarks.md) for a run that never compiles. The arithmetic
+is torch.optim.Adam's: on a CPU its single-tensor arithmetic (identical results, one torch._foreach_* call per
+operation), on a GPU its fused kernel with the step counts on the device, so that the update can be captured in a
+CUDA graph.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ class Adam:
         if self.capturable:
             self._fused_step(live)
         else:
-            self._single_tensor_step(live)
+            self._foreach_step(live)
 
     def _fused_step(self, live: list[int]) -> None:
         steps = [self.steps[i] for i in live]
@@ -41,7 +42,7 @@ class Adam:
                            lr=self.lr, beta1=BETA1, beta2=BETA2, weight_decay=self.weight_decay, eps=EPS,
                            amsgrad=False, maximize=False)
 
-    def _single_tensor_step(self, live: list[int]) -> None:
+    def _foreach_step(self, live: list[int]) -> None:
         """torch.optim.Adam's single-tensor arithmetic, each operation applied to every live tensor at once
         (torch._foreach_*: the same values, one call per operation instead of one per tensor and operation)."""
         for i in live:

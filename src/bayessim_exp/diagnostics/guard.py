@@ -66,6 +66,12 @@ def coverage_band(level: float, count: int, tolerance: float = COVERAGE_TOLERANC
     return level - half, level + half
 
 
+def _outside_warning(far: list[int], evidence: str, advice: str) -> str:
+    """The finding that real trajectories `far` lie where the model has no training simulations, with what shows it."""
+    return (f"the real data lie outside the simulations the model was trained on: real trajectories {far} {evidence}: "
+            f"the posterior there is an extrapolation. {advice}")
+
+
 def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, count: int,
                     baseline: str = "prior", effective_samples: float | None = None,
                     tolerance: float = COVERAGE_TOLERANCE, local: dict | None = None,
@@ -112,22 +118,20 @@ def check_posterior(mean_gain: float | None, coverage: dict[str, float] | None, 
     if extrapolation is not None and extrapolation["flagged"]:
         near_real = True
         far = extrapolation["flagged"]
-        warnings.append(
-            f"the real data lie outside the simulations the model was trained on: real trajectories {far} are "
-            f"farther from them (squared distances {[round(extrapolation['distance'][i], 1) for i in far]}, held-out "
-            f"median {extrapolation['held_out_median']:.1f}) than all but {[extrapolation['p_value'][i] for i in far]} "
-            "of the held-out simulations: the posterior there is an extrapolation. A real system in the joint tail "
-            "of independent ranges (every mass scaled alike) needs a prior that holds it; else try more simulations, "
-            "policy=replay with the real actions, or model.project_inputs=false")
+        warnings.append(_outside_warning(
+            far, f"are farther from them (squared distances {[round(extrapolation['distance'][i], 1) for i in far]}, "
+            f"held-out median {extrapolation['held_out_median']:.1f}) than all but "
+            f"{[extrapolation['p_value'][i] for i in far]} of the held-out simulations",
+            "A real system in the joint tail of independent ranges (every mass scaled alike) needs a prior that holds "
+            "it; else try more simulations, policy=replay with the real actions, or model.project_inputs=false"))
     if outside_range is not None and outside_range["flagged"]:
         near_real = True
         far = outside_range["flagged"]
-        warnings.append(
-            f"the real data lie outside the simulations the model was trained on: real trajectories {far} have "
-            f"{[outside_range['features_outside'][i] for i in far]} summary features outside the training "
+        warnings.append(_outside_warning(
+            far, f"have {[outside_range['features_outside'][i] for i in far]} summary features outside the training "
             f"simulations' range, more than all but {[outside_range['p_value'][i] for i in far]} of the held-out "
-            "simulations: the posterior there is an extrapolation. Try a prior that holds the real system, more "
-            "simulations, or policy=replay with the real actions")
+            "simulations",
+            "Try a prior that holds the real system, more simulations, or policy=replay with the real actions"))
     if effective_samples is not None and effective_samples < MIN_EFFECTIVE_SAMPLES:
         model_failed = True
         warnings.append(

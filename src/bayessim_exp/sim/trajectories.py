@@ -70,8 +70,9 @@ class Trajectories:
 
     @staticmethod
     def cat(parts: list[Trajectories]) -> Trajectories:
-        """The rows of every part, each field on the first part's device for it: MJX keeps states on the GPU and
-        `diverged` on the CPU, and its fused and stepwise rollouts (policies with and without noise) differ."""
+        """The rows of every part, each field on the first part's device for it: sim=mjx and sim=auto on a GPU run
+        batches below `native_below` on native MuJoCo, so a collect's small part of exact replays comes back on the
+        CPU beside its GPU part."""
         fields = [f.name for f in dataclasses.fields(Trajectories) if f.name != "dt"]
         return Trajectories(
             *(torch.cat([getattr(p, name).to(getattr(parts[0], name).device) for p in parts]) for name in fields),

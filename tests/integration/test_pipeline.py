@@ -237,9 +237,9 @@ def test_a_round_the_guard_fails_hands_on_the_last_one_that_passed(compose, tmp_
     assert not torch.equal(round_1.log_prob(theta), round_2.log_prob(theta))
 
 
-def _outside_in(monkeypatch, failing_round: int, model_failure: bool = False):
-    """The guard finds the real data outside the simulations in one round (with a model failure beside it where
-    asked), and passes the others."""
+def _outside_in(monkeypatch, failing_rounds: set[int], model_failure: bool = False):
+    """The guard finds the real data outside the simulations in `failing_rounds` (with a model failure beside it
+    where asked), and passes the others."""
     from bayessim_exp.diagnostics import guard
 
     real_check = guard.check_posterior
@@ -248,7 +248,7 @@ def _outside_in(monkeypatch, failing_round: int, model_failure: bool = False):
 
     def check(*args, **kwargs):
         report = real_check(*args, **kwargs)
-        if next(rounds) != failing_round:
+        if next(rounds) not in failing_rounds:
             return report
         return real_check(-1.0 if model_failure else 1.0, None, 1000, extrapolation=outside)
 
@@ -260,7 +260,7 @@ def test_a_round_whose_real_data_lie_outside_its_simulations_still_moves_the_nex
                                                                                            monkeypatch, escape):
     """Round 1's real data lie outside its simulations: domain randomization gets the prior, but round 2 proposes
     from where round 1 points (method.escape), not from the prior again; results.json says which."""
-    _outside_in(monkeypatch, 1)
+    _outside_in(monkeypatch, {1})
     results = Pipeline(compose(SMOKE + [f"method.escape={escape}"]), tmp_path).run()
     first, second = results["rounds"]
     source = "round 1's " + {"posterior": "posterior", "linear": "linear read of its real data",
@@ -278,12 +278,28 @@ def test_a_round_whose_real_data_lie_outside_its_simulations_still_moves_the_nex
         torch.testing.assert_close(region.posterior.in_probit_space().means[0], run_dir.load(1, "guard")["read"]["mean"])
 
 
+def test_linear_then_posterior_reads_after_a_prior_round_and_takes_the_posterior_after_a_read_round(compose, tmp_path,
+                                                                                                    monkeypatch):
+    """method.escape=linear_then_posterior, rounds 1 and 2 outside: round 2 proposes from round 1's linear read,
+    round 3 from round 2's own posterior (trained around the read), not from a second read."""
+    _outside_in(monkeypatch, {1, 2})
+    results = Pipeline(compose(SMOKE + ["method.escape=linear_then_posterior", "rounds=3"]), tmp_path).run()
+    guards = [r["guard"] for r in results["rounds"]]
+    assert [g["proposes_from"] for g in guards[:2]] == ["round 1's linear read of its real data", "round 2's posterior"]
+    assert [r["proposal_from"] for r in results["rounds"]] == [
+        "the prior", "round 1's linear read of its real data", "round 2's posterior"]
+    run_dir = RunDir(tmp_path)
+    theta = run_dir.load(3, "summarize")["theta"].double()
+    region = run_dir.load(3, "proposal")["proposal"]
+    torch.testing.assert_close(region.posterior.log_prob(theta), run_dir.load(2, "condition")["posterior"].log_prob(theta))
+
+
 @pytest.mark.parametrize("model_failure", [False, True])
 def test_without_escape_or_with_a_model_failure_the_next_round_proposes_as_this_one_did(compose, tmp_path,
                                                                                         monkeypatch, model_failure):
     """method.escape=none, or a model worse than its proposal beside the real data outside: more simulations from
     what the failing round proposed from (here the prior)."""
-    _outside_in(monkeypatch, 1, model_failure)
+    _outside_in(monkeypatch, {1}, model_failure)
     escape = "nearest" if model_failure else "none"
     results = Pipeline(compose(SMOKE + [f"method.escape={escape}"]), tmp_path).run()
     first, second = results["rounds"]

@@ -130,5 +130,5 @@ def test_an_unknown_option_lists_the_allowed_ones_registered_plugins_included(mo
 
 def test_an_unknown_escape_lists_the_allowed_ones():
     assert parse_params("method", {"name": "bayessim", "escape": "nearest"})[1].escape == "nearest"
-    with pytest.raises(ConfigError, match="escape='sysid' not allowed; allowed: linear, nearest, posterior, none"):
+    with pytest.raises(ConfigError, match="escape='sysid' not allowed; allowed: linear, nearest, linear_then_posterior, posterior, none"):
         parse_params("method", {"name": "bayessim", "escape": "sysid"})

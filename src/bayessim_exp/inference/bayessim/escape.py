@@ -13,6 +13,9 @@ summaries to its parameters (each coordinate's penalty by its error on the held-
 - `linear`: the regression read at the real data, its held-out error covariance times INFLATE. It extrapolates:
   on FrankaCabinet the next round's simulations surrounded the real data, on ShadowHand it put the palm's mass on
   the box's face (0.1 for 1.0) and the next round's posterior missed the truth behind a guard that passed;
+- `linear_then_posterior`: `linear` from a round that simulated from anything but a read, the round's own posterior
+  from one that simulated from a read: that round's model was trained around its real data, where a second linear
+  read extrapolates again from the read's own simulations (ShadowHand: the wrist's and palm's masses back on the face);
 - `posterior`: the round's own posterior, whose mixture network collapses onto the box's faces out there (Cartpole
   with its parameters at 1-5 % of their ranges: cart mass 0.314 +- 0.006 for 0.4);
 - `none`: what the round proposed from, as after a failure of the model itself.
@@ -28,7 +31,7 @@ from ...models.base import constant_columns
 from ...models.projection import RidgeSystem
 
 READS = ("linear", "nearest")  # the escapes that read a Gaussian off the real data
-ESCAPES = (*READS, "posterior", "none")
+ESCAPES = (*READS, "linear_then_posterior", "posterior", "none")
 NEAREST = 0.02  # the share of the fitted simulations whose linear reads lie nearest the real data's (nearest)
 PENALTIES = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5)  # on standardised summaries, each parameter's by held-out error
 INFLATE = 4.0  # a read's covariance is widened so (twice its standard deviation) that its region holds the truth

@@ -365,9 +365,9 @@ class BayesSim(InferenceMethod):
             source = handed_on_round(ctx, r - 1)
             if self.cfg.escape == "none" or not report.near_real_data_only:  # the model failed: simulate more alike
                 proposes = ProposalSource(ctx.output("proposal")["source"], ctx.output("proposal")["source_read"])
-            elif self.cfg.escape in READS:
-                read = self._read(ctx)
-                proposes = ProposalSource(r, self.cfg.escape)
+            elif (escape := self._escape(ctx)) in READS:
+                read = self._read(ctx, escape)
+                proposes = ProposalSource(r, escape)
         for warning in report.warnings:
             log.warning("round %d: %s", r, warning)
         if action == "fallback":
@@ -378,14 +378,20 @@ class BayesSim(InferenceMethod):
         return {**report.to_dict(), "action": action, "handed_on": source, "proposes_from": proposes.round,
                 "proposes_read": proposes.read, "read": read}
 
-    def _read(self, ctx: RoundContext) -> dict:
-        """escape.read_at (method.escape's read) on the rounds the model is trained on: their training rows fitted,
+    def _escape(self, ctx: RoundContext) -> str:
+        """method.escape for this round: linear_then_posterior is `linear` unless the round simulated from a read."""
+        if self.cfg.escape != "linear_then_posterior":
+            return self.cfg.escape
+        return "posterior" if ctx.output("proposal")["source_read"] else "linear"
+
+    def _read(self, ctx: RoundContext, escape: str) -> dict:
+        """escape.read_at (the `escape` read) on the rounds the model is trained on: their training rows fitted,
         the round's held-out rows checked, read at the real summaries, in the model's coordinates."""
         data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
         mean, cov = read_at(torch.cat([d[1] for d in data]), self._fitted_space(torch.cat([d[0] for d in data])),
                             data[-1][3], self._fitted_space(data[-1][2]),
                             ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]),
-                            nearest=self.cfg.escape == "nearest")
+                            nearest=escape == "nearest")
         return {"mean": mean, "cov": cov}
 
     def _read_distribution(self, read: dict) -> ParameterDistribution:

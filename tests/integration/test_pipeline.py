@@ -359,7 +359,7 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
     simulation (diagnostics/extrapolation.py). Without the replay widening the guard fails every round on it and
     domain randomization gets the prior; with it (Pendulum's default) the replays near the posterior measure the
     difference instead and the distance is recorded, not acted on. A pendulum inside the box passes (the tests of
-    posterior quality above). Round 2 proposes around round 1's simulations nearest the real data (method.escape)."""
+    posterior quality above). Round 2 proposes from round 1's linear read of the real data (method.escape)."""
     path = record_pendulum(tmp_path, [0.1, 0.1], n=1, horizon=20)
     results = Pipeline(compose(GUARDED + ["rounds=2", "real=file", f"real.path={path}",
                                           f"method.replay_tempering={replay_tempering}"]), tmp_path / "run").run()
@@ -371,7 +371,7 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
         if not replay_tempering:
             assert r["guard"]["failed"] and r["guard"]["handed_on"] == "the prior", r["guard"]
     if not replay_tempering:  # domain randomization gets the prior, the next round simulates where the data point
-        assert results["rounds"][1]["proposal_from"] == "round 1's simulations nearest its real data"
+        assert results["rounds"][1]["proposal_from"] == "round 1's linear read of its real data"
 
 
 def test_a_truth_in_the_priors_tail_that_the_distance_misses_is_caught_by_the_features_outside_the_range(compose,

@@ -6,16 +6,17 @@ but the next round need not simulate where this one did. The reads below are Gau
 the prior restricted to its 99.9 % region). Both start from a ridge regression from the round's standardised
 summaries to its parameters (each coordinate's penalty by its error on the held-out simulations):
 
-- `nearest` (the default): the simulations whose regression reads lie nearest the real data's (NEAREST of them;
+- `nearest`: the simulations whose regression reads lie nearest the real data's (NEAREST of them;
   semi-automatic ABC's summaries, Fearnhead and Prangle 2012), their mean and covariance times INFLATE. It moves by
   what the simulations show, a step a round: on FrankaCabinet and ShadowHand the truth stayed inside the 90 % region
   of every round it proposed, but two rounds did not reach the real data;
 - `linear`: the regression read at the real data, its held-out error covariance times INFLATE. It extrapolates:
   on FrankaCabinet the next round's simulations surrounded the real data, on ShadowHand it put the palm's mass on
   the box's face (0.1 for 1.0) and the next round's posterior missed the truth behind a guard that passed;
-- `linear_then_posterior`: `linear` from a round that simulated from anything but a read, the round's own posterior
-  from one that simulated from a read: that round's model was trained around its real data, where a second linear
-  read extrapolates again from the read's own simulations (ShadowHand: the wrist's and palm's masses back on the face);
+- `linear_then_posterior` (the default): `linear` from a round that simulated from anything but a read, the
+  round's own posterior from one that simulated from a read: that round's model was trained around its real data,
+  where a second linear read extrapolates again from the read's own simulations (ShadowHand: the wrist's and palm's
+  masses back on the face);
 - `posterior`: the round's own posterior, whose mixture network collapses onto the box's faces out there (Cartpole
   with its parameters at 1-5 % of their ranges: cart mass 0.314 +- 0.006 for 0.4);
 - `none`: what the round proposed from, as after a failure of the model itself.

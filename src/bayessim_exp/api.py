@@ -107,13 +107,15 @@ def compose(overrides: list[str] | None = None):
 
 
 def run(overrides: list[str] | None = None, out_dir: str | Path | None = None) -> dict:
-    """Run the pipeline as `python -m bayessim_exp <overrides>` would; returns results.json's content."""
+    """Run the pipeline as `python -m bayessim_exp <overrides>` would; returns results.json's content. Its
+    TensorBoard figures are drawn in this process: a spawned drawing process would import the caller's script again,
+    and run it again where it has no `if __name__ == "__main__":` guard."""
     from .pipeline import run as run_pipeline
 
     cfg = compose(overrides)
     if out_dir is None:
         out_dir = Path("outputs") / cfg.run_name / datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
-    return run_pipeline(cfg, out_dir)
+    return run_pipeline(cfg, out_dir, drawing_process=False)
 
 
 @dataclasses.dataclass
@@ -123,9 +125,13 @@ class Run:
     config: DictConfig  # the run's config.yaml
 
     def posterior(self, round_index: int | None = None) -> ParameterDistribution:
-        """The distribution a finished round ended with (the last round by default), read by the method's reader
-        (registry: posterior) from the round's artifacts and the prior: no simulator, summarizer or model is built."""
-        r = round_index or len(self.results["rounds"])
+        """The distribution finished round `round_index` (1, 2, ...; the last round by default) handed on, read by the
+        method's reader (registry: posterior) from the round's artifacts and the prior: no simulator, summarizer or
+        model is built."""
+        finished = len(self.results["rounds"])
+        r = finished if round_index is None else round_index
+        if not 1 <= r <= finished:
+            raise ValueError(f"round_index={round_index}: this run finished rounds 1 to {finished}")
         rc = check_run_config(self.config)
         registry.load_plugins(rc.plugins)
         task = registry.build("task", self.config.task)

@@ -35,7 +35,8 @@ from .stages import RoundContext, Stage, check_stages, run_stage
 
 
 class Pipeline:
-    def __init__(self, cfg: DictConfig, out_dir: str | Path):
+    def __init__(self, cfg: DictConfig, out_dir: str | Path, drawing_process: bool = True):
+        """drawing_process=False: TensorBoard's figures drawn in this process (logging/tensorboard.py)."""
         self.rc = check_run_config(cfg)
         registry.load_plugins(self.rc.plugins)
         comp = build_components(cfg, self.rc)  # every config error surfaces here or below, before any simulation
@@ -50,14 +51,14 @@ class Pipeline:
         self.stages = [Stage("real", self.real), *self.method.stages(), Stage("score", self.score),
                        *self.rl.stages()]
         check_stages(self.stages)
-        self._tb = None
+        self._tb, self._drawing_process = None, drawing_process
 
     @property
     def tb(self):
         if self._tb is None:
             from .logging.tensorboard import TensorBoardLogger
 
-            self._tb = TensorBoardLogger(self.run_dir.path)
+            self._tb = TensorBoardLogger(self.run_dir.path, self._drawing_process)
             self._tb.config(OmegaConf.to_yaml(self.cfg, resolve=True))
         return self._tb
 
@@ -166,6 +167,7 @@ def _numbers(record: dict, prefix: str = "") -> dict[str, float]:
     return out
 
 
-def run(cfg: DictConfig, out_dir: str | Path, stop_after: tuple[int, str] | None = None) -> dict:
-    return Pipeline(cfg, out_dir).run(stop_after)
+def run(cfg: DictConfig, out_dir: str | Path, stop_after: tuple[int, str] | None = None,
+        drawing_process: bool = True) -> dict:
+    return Pipeline(cfg, out_dir, drawing_process).run(stop_after)
 

@@ -6,6 +6,10 @@ on its stages. A drawing thread gained nothing (measured, docs/benchmarks.md), p
 takes the GIL from the stages' many short torch calls. The figures' data (posterior draws included)
 is taken in the run's process, so its random streams do not depend on the drawing. close() waits for
 every figure; one that fails is reported and left out, never failing the run.
+
+A spawned process imports the caller's `__main__` again: a user's script that calls api.run without a main guard
+would run again in it (a second run into the same directory, then a crash). So api.run draws in its own process
+(`drawing_process=False`), as does any run whose drawing process cannot start.
 """
 
 from __future__ import annotations
@@ -63,27 +67,43 @@ def _interpreter_start_method():
         multiprocessing.set_start_method(method, force=True)
 
 
+class _InProcess:
+    """The drawing done where it is asked for, behind the executor's submit / shutdown."""
+
+    def submit(self, fn, *args) -> Future:
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args))
+        except Exception as exc:  # noqa: BLE001 - reported where the figure is written, as from the process
+            future.set_exception(exc)
+        return future
+
+    def shutdown(self) -> None:
+        pass
+
+
 class TensorBoardLogger:
-    def __init__(self, log_dir: str | Path):
+    def __init__(self, log_dir: str | Path, drawing_process: bool = True):
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(log_dir=str(log_dir))
-        # spawn: a forked copy of a process that holds CUDA and JAX state is not safe
-        with _interpreter_start_method():  # the process starts at the first submit
-            self._drawing = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                                                initializer=_drawing_process_setup)
-            self._drawing.submit(_warm_up)
+        self._drawing: ProcessPoolExecutor | _InProcess = _InProcess()
+        if drawing_process:
+            # spawn: a forked copy of a process that holds CUDA and JAX state is not safe
+            with _interpreter_start_method():  # the process starts at the first submit
+                self._drawing = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                                                    initializer=_drawing_process_setup)
+                self._drawing.submit(_warm_up)
         self._pending: list[tuple[str, int, Future]] = []  # figures being drawn, in the order asked for
-        self._broken = False
 
     def _figure(self, tag: str, step: int, name: str, *args) -> None:
-        if self._broken:
-            return
         try:
             self._pending.append((tag, step, self._drawing.submit(_png, name, *args)))
-        except BrokenProcessPool as exc:  # the drawing process died: figures are not worth a run
-            self._broken = True
-            log.warning("TensorBoard figures are left out from round %d on: the drawing process ended (%s)", step, exc)
+        except BrokenProcessPool as exc:  # the drawing process died: the figures are drawn here from now on
+            log.warning("TensorBoard figures are drawn in the run's process from round %d on: the drawing process "
+                        "ended (%s)", step, exc)
+            self._drawing = _InProcess()
+            self._pending.append((tag, step, self._drawing.submit(_png, name, *args)))
         self._add_drawn()
 
     def _add_drawn(self, wait: bool = False) -> None:

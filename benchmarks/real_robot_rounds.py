@@ -55,7 +55,7 @@ def rows(sweep: Path, alpha: float) -> list[str]:
                          f"({'n/a' if gain is None else f'{gain:+.1f}'})")
         final = rounds[-1].get("log_prob_gain")
         finals.append(final)
-        passed = any(r["guard"]["action"] in ("none", "warn") for r in rounds)
+        passed = any(r["guard"]["action"] in ("none", "warn", "provisional") for r in rounds)
         from_prior = sum(r["proposal"] == "prior" for r in rounds[1:])
         status = "" if job.status == "finished" else f" ({job.status})"
         out.append(f"| {job.seed}{status} | {'; '.join(cells)} | "

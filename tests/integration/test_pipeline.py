@@ -294,6 +294,34 @@ def test_linear_then_posterior_reads_after_a_prior_round_and_takes_the_posterior
     torch.testing.assert_close(region.posterior.log_prob(theta), run_dir.load(2, "condition")["posterior"].log_prob(theta))
 
 
+def test_a_round_that_simulated_from_a_read_and_passes_is_handed_on_only_once_the_next_round_passes(compose, tmp_path,
+                                                                                                       monkeypatch):
+    """Round 1's real data lie outside its simulations, round 2 simulates from its linear read and passes: its checks
+    saw only the read's region, so round 2 is provisional (domain randomization keeps the prior, round 3 proposes from
+    round 2's posterior); round 3 passes and hands its posterior on."""
+    from bayessim_exp.diagnostics import guard
+
+    real_check = guard.check_posterior
+    rounds = iter(range(1, 10))
+    outside = {"flagged": [0], "distance": [100.0], "held_out_median": 10.0, "p_value": [0.001]}
+
+    def check(*args, **kwargs):
+        return real_check(1.0, None, 1000, extrapolation=outside if next(rounds) == 1 else None)
+
+    monkeypatch.setattr("bayessim_exp.inference.bayessim.method.check_posterior", check)
+    results = Pipeline(compose(SMOKE + ["rounds=3"]), tmp_path).run()
+    guards = [r["guard"] for r in results["rounds"]]
+    assert [g["action"] for g in guards] == ["fallback", "provisional", "none"], guards
+    assert [g["handed_on"] for g in guards] == ["the prior", "the prior", "round 3's posterior"]
+    assert [r["proposal_from"] for r in results["rounds"]] == [
+        "the prior", "round 1's linear read of its real data", "round 2's posterior"]
+    assert results["rounds"][1]["log_prob_gain"] == pytest.approx(0.0)  # the prior scored against itself
+    run = api.load_run(tmp_path)
+    theta = RunDir(tmp_path).load(3, "summarize")["theta"].double()
+    torch.testing.assert_close(run.posterior(3).log_prob(theta),
+                               RunDir(tmp_path).load(3, "condition")["posterior"].log_prob(theta))
+
+
 @pytest.mark.parametrize("model_failure", [False, True])
 def test_without_escape_or_with_a_model_failure_the_next_round_proposes_as_this_one_did(compose, tmp_path,
                                                                                         monkeypatch, model_failure):

@@ -90,7 +90,7 @@ def calibration(jobs: list[Job]) -> Calibration | None:
         gains=[f.get("log_prob_gain") for f in finals],
         guard_failed_final=sum(guard_failed(f) for f in finals),
         guard_failed_any=sum(any(guard_failed(r) for r in j.results["rounds"]) for j in known),
-        handed_on_other=sum((f.get("guard") or {}).get("action") == "fallback" for f in finals),
+        handed_on_other=sum((f.get("guard") or {}).get("action") in ("fallback", "provisional") for f in finals),
         handed_on_prior=sum((f.get("guard") or {}).get("handed_on") == "the prior" for f in finals),
         sources=sorted({str(j.results.get("truth_source")) for j in known}),
         flagged_final=sum(flagged(f) for f in finals),

@@ -9,7 +9,7 @@ every figure; one that fails is reported and left out, never failing the run.
 
 A spawned process imports the caller's `__main__` again: a user's script that calls api.run without a main guard
 would run again in it (a second run into the same directory, then a crash). So api.run draws in its own process
-(`drawing_process=False`), as does any run whose drawing process cannot start.
+(`drawing_process=False`), as does any run from the moment its drawing process ends.
 """
 
 from __future__ import annotations

@@ -366,10 +366,9 @@ class BayesSim(InferenceMethod):
         if action in ("none", "warn") and self.cfg.on_guard == "fallback" and ctx.output("proposal")["source_read"]:
             action = "provisional"
         source, proposes, read = r, ProposalSource(r), None
-        if action == "provisional":
+        if action in ("provisional", "fallback"):
             source = handed_on_round(ctx, r - 1)
         if action == "fallback":
-            source = handed_on_round(ctx, r - 1)
             if self.cfg.escape == "none" or not report.near_real_data_only:  # the model failed: simulate more alike
                 proposes = ProposalSource(ctx.output("proposal")["source"], ctx.output("proposal")["source_read"])
             elif (escape := self._escape(ctx)) in READS:

@@ -362,15 +362,16 @@ class BayesSim(InferenceMethod):
                                  outside_range=None if widened_by_replays else flag_outside(
                                      checked["mismatch"]["summaries_outside"],
                                      self.inputs.rc.diagnostics.extrapolation_alpha))
+        simulated_from = self._simulated_from(ctx)
         action = self.cfg.on_guard if report.failed else "warn" if report.warnings else "none"
-        if action in ("none", "warn") and self.cfg.on_guard == "fallback" and ctx.output("proposal")["source_read"]:
+        if action in ("none", "warn") and self.cfg.on_guard == "fallback" and simulated_from.read:
             action = "provisional"
         source, proposes, read = r, ProposalSource(r), None
         if action in ("provisional", "fallback"):
             source = handed_on_round(ctx, r - 1)
         if action == "fallback":
             if self.cfg.escape == "none" or not report.near_real_data_only:  # the model failed: simulate more alike
-                proposes = ProposalSource(ctx.output("proposal")["source"], ctx.output("proposal")["source_read"])
+                proposes = simulated_from
             elif (escape := self._escape(ctx)) in READS:
                 read = self._read(ctx, escape)
                 proposes = ProposalSource(r, escape)
@@ -379,9 +380,7 @@ class BayesSim(InferenceMethod):
         if action == "provisional":
             log.warning("round %d: the guard passed a round that simulated from %s, whose region its checks cannot see "
                         "past: the next round proposes from its posterior, domain randomization keeps %s until a "
-                        "round proposing from there passes", r, ProposalSource(ctx.output("proposal")["source"],
-                                                                      ctx.output("proposal")["source_read"]).describe(),
-                        _round_name(source))
+                        "round proposing from there passes", r, simulated_from.describe(), _round_name(source))
         if action == "fallback":
             why = (f"its real data lie outside its simulations: method.escape={self.cfg.escape}"
                    if proposes.round == r else "as this round did")
@@ -390,11 +389,17 @@ class BayesSim(InferenceMethod):
         return {**report.to_dict(), "action": action, "handed_on": source, "proposes_from": proposes.round,
                 "proposes_read": proposes.read, "read": read}
 
+    @staticmethod
+    def _simulated_from(ctx: RoundContext) -> ProposalSource:
+        """What this round's proposal was built from (its proposal stage records it)."""
+        proposal = ctx.output("proposal")
+        return ProposalSource(proposal["source"], proposal["source_read"])
+
     def _escape(self, ctx: RoundContext) -> str:
         """method.escape for this round: linear_then_posterior is `linear` unless the round simulated from a read."""
         if self.cfg.escape != "linear_then_posterior":
             return self.cfg.escape
-        return "posterior" if ctx.output("proposal")["source_read"] else "linear"
+        return "posterior" if self._simulated_from(ctx).read else "linear"
 
     def _read(self, ctx: RoundContext, escape: str) -> dict:
         """escape.read_at (the `escape` read) on the rounds the model is trained on: their training rows fitted,
@@ -435,8 +440,7 @@ class BayesSim(InferenceMethod):
             "val_loss": hist["best_val"],
             "joint_spread": hist.get("joint_spread"),  # the common factor on the spread (models/spread.py)
             "proposal": self._proposal_name(ctx),
-            "proposal_from": ProposalSource(ctx.output("proposal")["source"],
-                                            ctx.output("proposal")["source_read"]).describe(),
+            "proposal_from": self._simulated_from(ctx).describe(),
             "coverage": fitted["coverage"],
             "held_out": fitted["held_out"],
             "identifiability": {k: v for k, v in ctx.output("identifiability").items() if k != "seconds"},

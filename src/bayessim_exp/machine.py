@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import importlib.util
 import logging
+import os
 
 import torch
 from omegaconf import DictConfig
@@ -24,6 +25,12 @@ from .run_config import RunConfig
 
 log = logging.getLogger(__name__)
 _SAID: set[str] = set()  # the choices already logged by this process
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on: its affinity (a Slurm job's share, a pinned test worker's), not the
+    machine's count (macOS and Windows have no affinity call: every CPU there)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def fit_to_machine(cfg: DictConfig, rc: RunConfig) -> DictConfig:

@@ -23,6 +23,20 @@ _PAD = 0.15
 _MIN_WIDTH = 1e-3  # of the prior's width: a posterior collapsed to a point still gets a readable window
 _GRID = 50  # cells per axis of the 2-D density
 _SMOOTHING = 1.5  # cells: Gaussian smoothing of the 2-D histogram before contouring
+_CHAR_WIDTH = 0.55 / 72  # inches per character per point of font size (a generous average for the default font)
+
+
+def _margins(fig: plt.Figure, left: float, right: float, bottom: float, top: float, between_x: float = 0.0,
+             between_y: float = 0.0) -> None:
+    """Margins and gaps between panels in inches, laid out once: matplotlib's tight_layout measures every tick
+    label by drawing the figure, which doubled a figure's drawing time (docs/benchmarks.md)."""
+    width, height = fig.get_size_inches()
+    grid = fig.axes[0].get_subplotspec().get_gridspec()
+    rows, cols = grid.get_geometry()
+    panel_w = (width - left - right - (cols - 1) * between_x) / cols
+    panel_h = (height - bottom - top - (rows - 1) * between_y) / rows
+    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height, top=1 - top / height,
+                        wspace=between_x / panel_w, hspace=between_y / panel_h)
 
 
 def zoom_window(values: np.ndarray, low: float, high: float, true: float | None = None) -> tuple[float, float]:
@@ -140,7 +154,9 @@ def pair_plot(samples: np.ndarray, names: list[str], low: np.ndarray, high: np.n
         fig.legend(handles, labels, loc="upper right", bbox_to_anchor=(0.99, 0.93), fontsize=8, frameon=False)
     fig.suptitle(f"{title}\nzoomed to the posterior; bars: the window in the prior's range",
                  fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    # room for 7-point tick labels beside and below every panel, the prior's strip above the diagonal's (its
+    # height a share of the panel's: a lone panel is the tallest)
+    _margins(fig, left=0.75, right=0.2, bottom=0.55, top=1.05 if d > 1 else 1.3, between_x=0.45, between_y=0.6)
     return fig
 
 
@@ -165,7 +181,7 @@ def replay_plot(real: np.ndarray, posterior: np.ndarray, prior: np.ndarray, obs_
             if i == n - 1:
                 ax.set_xlabel("time [s]")
     fig.suptitle(f"{title}: real (black), posterior replays (blue), prior replays (grey)")
-    fig.tight_layout()
+    _margins(fig, left=1.05, right=0.15, bottom=0.55, top=0.65, between_x=0.6, between_y=0.35)
     return fig
 
 
@@ -189,7 +205,8 @@ def identifiability_plot(names: list[str], r2: list[float], rms: list[float] | N
         ax.set_xscale("log")
         ax.set_xlabel("summaries moved per prior std at the nominal\n(RMS, standardised; red: no effect)")
     fig.suptitle(f"identifiability, {title}", fontsize=9)
-    fig.tight_layout()
+    _margins(fig, left=0.25 + 7 * _CHAR_WIDTH * max(map(len, names)), right=0.2, bottom=0.75, top=0.35,
+             between_x=0.25)
     return fig
 
 

@@ -7,6 +7,10 @@ takes the GIL from the stages' many short torch calls. The figures' data (poster
 is taken in the run's process, so its random streams do not depend on the drawing. close() waits for
 every figure; one that fails is reported and left out, never failing the run.
 
+A process that may run on one CPU only (a pinned test worker, a one-core Slurm job) draws in its own process: the
+drawing process would gain nothing there, and its start (a fresh interpreter importing torch and matplotlib) costs
+more CPU time than the figures themselves (docs/benchmarks.md).
+
 A spawned process imports the caller's `__main__` again: a user's script that calls api.run without a main guard
 would run again in it (a second run into the same directory, then a crash). So api.run draws in its own process
 (`drawing_process=False`), as does any run from the moment its drawing process ends.
@@ -25,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..machine import usable_cpus
 from ..quick_exit import exit_without_finalization
 
 log = logging.getLogger(__name__)
@@ -88,7 +93,8 @@ class TensorBoardLogger:
 
         self.writer = SummaryWriter(log_dir=str(log_dir))
         self._drawing: ProcessPoolExecutor | _InProcess = _InProcess()
-        if drawing_process:
+        # on one CPU a second process draws nothing sooner, and starting it costs twice the drawing's CPU time
+        if drawing_process and usable_cpus() > 1:
             # spawn: a forked copy of a process that holds CUDA and JAX state is not safe
             with _interpreter_start_method():  # the process starts at the first submit
                 self._drawing = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),

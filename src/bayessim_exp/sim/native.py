@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import os
 import types
 
 import mujoco
@@ -12,6 +11,7 @@ import torch
 from mujoco import batch as mjbatch
 
 from ..errors import ConfigError
+from ..machine import usable_cpus
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec
 from .base import Simulator, broke_down
@@ -23,13 +23,9 @@ _DIVERGENCE_WARNINGS = [
 
 
 def simulation_threads(nthread: int) -> int:
-    """nthread, or for 0 the CPUs this process may run on: its affinity (a Slurm job's share, a pinned test
-    worker's), not the machine's count that mujoco.batch's own 0 means (64 threads in each of 8 processes on a
-    64-core machine)."""
-    if nthread:
-        return nthread
-    # macOS and Windows have no affinity call: every CPU there
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    """nthread, or for 0 the CPUs this process may run on (machine.usable_cpus), not the machine's count that
+    mujoco.batch's own 0 means (64 threads in each of 8 processes on a 64-core machine)."""
+    return nthread or usable_cpus()
 
 
 @dataclasses.dataclass

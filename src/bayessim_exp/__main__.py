@@ -42,15 +42,27 @@ def _app(cfg: DictConfig) -> float:
             raise
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
-    last = results["rounds"][-1]
-    print(f"{results['run_name']}: {len(results['rounds'])} rounds -> {out_dir}")
-    for name in results["param_names"][:8]:
-        print(f"  {name:>20s}: {last['posterior_mean'][name]:.4g} +- {last['posterior_std'][name]:.3g}"
-              + (f"  (true {results['true_params'][name]:.4g})" if results["true_params"] else ""))
-    gain = last["log_prob_gain"]
-    if gain is not None:
-        print(f"  log p(true | real) - log p(true) = {gain:.2f} nats")
+    print("\n".join(summary_lines(results, out_dir)))
+    gain = results["rounds"][-1]["log_prob_gain"]
     return math.nan if gain is None else float(gain)
+
+
+def summary_lines(results: dict, out_dir) -> list[str]:
+    """A finished run in a few lines: what it handed on (the last round's posterior, an earlier one or the prior),
+    that distribution's means and standard deviations, and its gain at the truth where one is known."""
+    last, rounds = results["rounds"][-1], len(results["rounds"])
+    lines = [f"{results['run_name']}: {rounds} rounds -> {out_dir}"]
+    handed_on = results.get("handed_on")
+    if handed_on is not None:
+        kept = "" if handed_on["round"] == rounds else (
+            f", not round {rounds}'s posterior (the guard's warnings above; results.json: rounds[-1].guard)")
+        lines.append(f"  handed on: {handed_on['name']}{kept}")
+    for name in results["param_names"][:8]:
+        lines.append(f"  {name:>20s}: {last['posterior_mean'][name]:.4g} +- {last['posterior_std'][name]:.3g}"
+                     + (f"  (true {results['true_params'][name]:.4g})" if results["true_params"] else ""))
+    if last["log_prob_gain"] is not None:
+        lines.append(f"  log p(true | real) - log p(true) = {last['log_prob_gain']:.2f} nats")
+    return lines
 
 
 def main() -> None:

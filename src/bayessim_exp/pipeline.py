@@ -27,8 +27,9 @@ from .artifacts import RunDir
 from .components import CollectPolicies, build_components, build_method, build_rl
 from .diagnostics.scoring import score
 from .distributions.base import ParameterDistribution
+from .distributions.independent import BoxUniform
 from .errors import ConfigError, PosteriorError
-from .inference.base import InferenceMethod
+from .inference.base import InferenceMethod, handed_on_name
 from .run_config import check_run_config
 from .sim.trajectories import Trajectories
 from .stages import RoundContext, Stage, check_stages, run_stage
@@ -79,16 +80,21 @@ class Pipeline:
         return {"traj": merged.state_dict(), "new": traj.num}
 
     def score(self, ctx: RoundContext) -> dict:
-        """The round's distribution against the prior (and the true parameters when known), plotted."""
+        """The round's distribution against the prior (and the true parameters when known), plotted, with whose
+        distribution it is: the round's own posterior, or what the round handed on instead."""
         posterior = self.method.posterior(ctx)
+        source = self.method.handed_on_round(ctx)
         names = self.task.spec.names
         true = self.real_source.true_params
         lc = self.rc.logging
         plot_names = list(lc.plot_params) if lc.plot_params is not None else names[: lc.max_plot_params]
         spec = self.task.spec
+        title = (f"posterior, round {ctx.round}" if source == ctx.round
+                 else f"{handed_on_name(source)}, handed on in round {ctx.round}")
         ctx.tb.posterior(ctx.round, posterior, self.prior, names, plot_names, true, lc.plot_samples,
-                         spec.low, spec.high)
-        return score(posterior, self.prior, names, true, ctx.seed)
+                         spec.low, spec.high, title, flat=source == 0 and isinstance(self.prior, BoxUniform))
+        return {**score(posterior, self.prior, names, true, ctx.seed),
+                "handed_on": {"round": source, "name": handed_on_name(source)}}
 
     # the loop ------------------------------------------------------------------------
     def run(self, stop_after: tuple[int, str] | None = None) -> dict:
@@ -122,6 +128,8 @@ class Pipeline:
                 recording = ctx.at("record")
                 record = self._record(recording, seconds)
                 results["rounds"].append(record)
+                if "handed_on" in record:  # absent from rounds scored before it was recorded (a resumed run)
+                    results["handed_on"] = record["handed_on"]  # what domain randomization gets after the last round
                 self.run_dir.write_json("results.json", results)
                 self.tb.scalars(r, _numbers(record))
                 reason = self.method.stop_reason(recording)

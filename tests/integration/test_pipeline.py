@@ -75,6 +75,23 @@ def test_results_and_tensorboard_are_written(compose, tmp_path):
     assert "config/text_summary" in events.Tags()["tensors"]
 
 
+def test_a_run_that_falls_back_says_so_in_its_summary_results_and_figure_titles(compose, tmp_path, monkeypatch):
+    """The smoke budget's models fail the guard in both rounds: the prior is handed on, and everything that shows the
+    run's result says so (its means and standard deviations are the prior's)."""
+    from bayessim_exp.__main__ import summary_lines
+    from bayessim_exp.logging import plots
+
+    drawn, pair_plot = [], plots.pair_plot
+    monkeypatch.setattr(plots, "pair_plot", lambda *args: drawn.append((args[5], args[7])) or pair_plot(*args))
+    results = Pipeline(compose(SMOKE), tmp_path, drawing_process=False).run()
+    assert [r["guard"]["action"] for r in results["rounds"]] == ["fallback", "fallback"]
+    assert results["handed_on"] == {"round": 0, "name": "the prior"}
+    assert json.loads((tmp_path / "results.json").read_text())["handed_on"] == results["handed_on"]
+    assert drawn == [("the prior, handed on in round 1", True), ("the prior, handed on in round 2", True)]
+    assert summary_lines(results, tmp_path)[1] == ("  handed on: the prior, not round 2's posterior (the guard's "
+                                                   "warnings above; results.json: rounds[-1].guard)")
+
+
 def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(tmp_path, caplog):
     from bayessim_exp.logging.tensorboard import TensorBoardLogger
 
@@ -126,6 +143,7 @@ def test_posterior_concentrates_on_the_true_parameters_calibrated_in_every_round
 
     results = Pipeline(compose([f"seed={seed}", "logging.progress=false"] + SMALL_BUDGET), tmp_path).run()
     last = results["rounds"][-1]
+    assert results["handed_on"] == {"round": 3, "name": "round 3's posterior"}
     assert last["log_prob_gain"] >= 2.0
     for name in results["param_names"]:
         assert last["posterior_std"][name] < last["prior_std"][name] / 3, name

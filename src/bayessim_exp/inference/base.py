@@ -8,6 +8,8 @@ The pipeline owns the loop, seeds, artifacts and logging; a method contributes
     proposal(ctx)    the distribution the round simulates parameters from
     posterior(ctx)   the new distribution after the round, from its artifacts (a ParameterDistribution:
                      scored, plotted and handed to domain randomization like any other)
+    handed_on_round(ctx)  whose distribution posterior(ctx) is: the round's own (the default), an earlier
+                     round's, or the prior's (0), where a check kept the round's own from being handed on
     record(ctx)      method-specific fields of the round's entry in results.json
     stop_reason(ctx) why the run must stop after this round (its results written), or None
 
@@ -70,11 +72,19 @@ class InferenceMethod(abc.ABC):
     @abc.abstractmethod
     def posterior(self, ctx: RoundContext) -> ParameterDistribution: ...
 
+    def handed_on_round(self, ctx: RoundContext) -> int:
+        return ctx.round
+
     def record(self, ctx: RoundContext) -> dict:
         return {}
 
     def stop_reason(self, ctx: RoundContext) -> str | None:
         return None
+
+
+def handed_on_name(source: int) -> str:
+    """What a round handed on, in words: round `source`'s posterior, or the prior for 0."""
+    return "the prior" if source == 0 else f"round {source}'s posterior"
 
 
 def real_trajectories(ctx: RoundContext) -> Trajectories:

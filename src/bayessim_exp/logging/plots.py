@@ -64,14 +64,18 @@ def hpd_thresholds(density: np.ndarray, masses=MASS_LEVELS) -> list[float]:
     return [float(flat[min(np.searchsorted(cumulative, m), len(flat) - 1)]) for m in masses]
 
 
-def _marginal(ax, i, samples, prior_samples, window, true):
+def _marginal(ax, i, samples, prior_samples, window, true, flat_density):
+    """`flat_density`: the density of a flat distribution, drawn as it is rather than as its draws' histogram."""
     bins = np.linspace(*window, 41)
     width = bins[1] - bins[0]
     if prior_samples is not None:
         counts, _ = np.histogram(prior_samples[:, i], bins)
         ax.stairs(counts / (len(prior_samples) * width), bins, fill=True, color="0.85", label="prior")
-    counts, _ = np.histogram(samples[:, i], bins)
-    ax.stairs(counts / (len(samples) * width), bins, color="C0", lw=1.5, label="posterior")
+    if flat_density is None:
+        counts, _ = np.histogram(samples[:, i], bins)
+        ax.stairs(counts / (len(samples) * width), bins, color="C0", lw=1.5, label="posterior")
+    else:
+        ax.stairs([flat_density], window, color="C0", lw=1.5, label="posterior")
     _mark_true_1d(ax, true, window)
     ax.set_xlim(*window)
     ax.set_yticks([])
@@ -102,7 +106,20 @@ def _prior_strip(ax, low, high, window, true):
     strip.text(1.0, 1.2, f"{high:.3g}", transform=strip.transAxes, fontsize=6, ha="right", va="bottom", color="0.4")
 
 
-def _joint(ax, x, y, window_x, window_y, true_xy):
+def _joint(ax, x, y, window_x, window_y, true_xy, flat):
+    if flat:  # no region of a flat density holds more than its area's share: contours would trace the draws' noise
+        ax.axvspan(*window_x, color="#9ecae1")
+        ax.text(0.5, 0.5, "flat", transform=ax.transAxes, ha="center", va="center", fontsize=8, color="#08519c")
+    else:
+        _regions(ax, x, y, window_x, window_y)
+    if true_xy is not None and window_x[0] <= true_xy[0] <= window_x[1] and window_y[0] <= true_xy[1] <= window_y[1]:
+        ax.plot(*true_xy, marker="x", color="red", ms=8, mew=2)
+    ax.set_xlim(*window_x)
+    ax.set_ylim(*window_y)
+
+
+def _regions(ax, x, y, window_x, window_y):
+    """The 50 % and 90 % highest-density regions of the draws (x, y), from their smoothed 2-D histogram."""
     counts, xe, ye = np.histogram2d(x, y, bins=_GRID, range=[window_x, window_y])
     density = gaussian_filter(counts, _SMOOTHING)
     levels = sorted(set(hpd_thresholds(density)) | {float(density.max())}) if density.sum() > 0 else []
@@ -112,15 +129,13 @@ def _joint(ax, x, y, window_x, window_y, true_xy):
         ax.contour(centres_x, centres_y, density.T, levels=levels[:-1], colors="#08519c", linewidths=0.8)
     else:  # too few distinct cells for contours (a point mass): show the draws themselves
         ax.plot(x[:500], y[:500], ".", color="C0", ms=2)
-    if true_xy is not None and window_x[0] <= true_xy[0] <= window_x[1] and window_y[0] <= true_xy[1] <= window_y[1]:
-        ax.plot(*true_xy, marker="x", color="red", ms=8, mew=2)
-    ax.set_xlim(*window_x)
-    ax.set_ylim(*window_y)
 
 
 def pair_plot(samples: np.ndarray, names: list[str], low: np.ndarray, high: np.ndarray,
-              true: np.ndarray | None, title: str, prior_samples: np.ndarray | None = None) -> plt.Figure:
-    """samples [n, d] of the posterior; prior_samples [m, d] drawn from the prior for its marginals."""
+              true: np.ndarray | None, title: str, prior_samples: np.ndarray | None = None,
+              flat: bool = False) -> plt.Figure:
+    """samples [n, d] of the posterior; prior_samples [m, d] drawn from the prior for its marginals; `flat`: the
+    samples' distribution is uniform on [low, high] (a uniform prior handed on), drawn as such."""
     samples = samples[np.isfinite(samples).all(1)]
     d = len(names)
     windows = [zoom_window(samples[:, i], low[i], high[i], None if true is None else true[i]) for i in range(d)]
@@ -133,11 +148,12 @@ def pair_plot(samples: np.ndarray, names: list[str], low: np.ndarray, high: np.n
             if j > i:
                 ax.axis("off")
             elif i == j:
-                _marginal(ax, i, samples, prior_samples, windows[i], t_i)
+                _marginal(ax, i, samples, prior_samples, windows[i], t_i,
+                          1 / (high[i] - low[i]) if flat else None)
                 _prior_strip(ax, float(low[i]), float(high[i]), windows[i], t_i)
             else:
                 _joint(ax, samples[:, j], samples[:, i], windows[j], windows[i],
-                       None if true is None else (float(true[j]), float(true[i])))
+                       None if true is None else (float(true[j]), float(true[i])), flat)
             if i == d - 1:
                 ax.set_xlabel(names[j])
             if j == 0 and i > 0:

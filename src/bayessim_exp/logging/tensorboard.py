@@ -139,14 +139,15 @@ class TensorBoardLogger:
                 self.writer.add_scalar(tag, v, round_index)
 
     def posterior(self, round_index: int, posterior, prior, names: list[str], plot_names: list[str],
-                  true: np.ndarray | None, num_samples: int, low: np.ndarray, high: np.ndarray) -> None:
-        """Pair plot of posterior draws over prior draws; low/high: the parameters' ranges (the axes)."""
+                  true: np.ndarray | None, num_samples: int, low: np.ndarray, high: np.ndarray, title: str,
+                  flat: bool = False) -> None:
+        """Pair plot of draws of what the round handed on over prior draws, titled `title`; low/high: the
+        parameters' ranges (the axes); `flat`: the distribution is uniform on them."""
         idx = [names.index(n) for n in plot_names]
         samples = posterior.sample((num_samples,)).numpy()[:, idx]
         prior_samples = prior.sample((num_samples,)).numpy()[:, idx]
         self._figure("posterior", round_index, "pair_plot", samples, plot_names, np.asarray(low)[idx],
-                     np.asarray(high)[idx], None if true is None else true[idx], f"posterior, round {round_index}",
-                     prior_samples)
+                     np.asarray(high)[idx], None if true is None else true[idx], title, prior_samples, flat)
 
     def identifiability(self, round_index: int, names: list[str], report: dict) -> None:
         """The identifiability report (diagnostics/identifiability.py) as bars per parameter."""

@@ -31,6 +31,7 @@ from ...distributions.base import NOT_GAUSSIAN, ParameterDistribution
 from ...distributions.importance import DefensiveMixture, ImportancePosterior
 from ...distributions.mixture import GaussianMixture, NotPositiveDefinite, TruncatedMixture
 from ...distributions.restricted import Restricted
+from ...stages import info_once_per_round
 
 log = logging.getLogger(__name__)
 
@@ -213,7 +214,8 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
             if result is None and isinstance(prior_factor, tuple):
                 result = _closed_form(product(True), tau, lam, eta)
                 if result is not None:
-                    log.info("posterior: components wider than the prior narrowed to it, keeping the closed form")
+                    info_once_per_round(log, "posterior: components wider than the prior narrowed to it, keeping "
+                                                  "the closed form")
             if result is not None:
                 return result if box is None else TruncatedMixture(result, *box, seed=seed)
             reason = "the product or a component's corrected precision is not positive definite"

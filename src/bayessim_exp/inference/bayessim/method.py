@@ -32,7 +32,7 @@ from ...errors import ConfigError, PosteriorError
 from ...models.base import column_scale
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
-from ..base import InferenceMethod, MethodInputs, real_trajectories
+from ..base import InferenceMethod, MethodInputs, handed_on_name, real_trajectories
 from .combination import COMBINATIONS
 from .condition import condition, tempered_product
 from .escape import ESCAPES, READS, read_at
@@ -380,12 +380,12 @@ class BayesSim(InferenceMethod):
         if action == "provisional":
             log.warning("round %d: the guard passed a round that simulated from %s, whose region its checks cannot see "
                         "past: the next round proposes from its posterior, domain randomization keeps %s until a "
-                        "round proposing from there passes", r, simulated_from.describe(), _round_name(source))
+                        "round proposing from there passes", r, simulated_from.describe(), handed_on_name(source))
         if action == "fallback":
             why = (f"its real data lie outside its simulations: method.escape={self.cfg.escape}"
                    if proposes.round == r else "as this round did")
             log.warning("round %d: the guard failed; domain randomization gets %s instead (method.on_guard=fallback); "
-                        "the next round proposes from %s (%s)", r, _round_name(source), proposes.describe(), why)
+                        "the next round proposes from %s (%s)", r, handed_on_name(source), proposes.describe(), why)
         return {**report.to_dict(), "action": action, "handed_on": source, "proposes_from": proposes.round,
                 "proposes_read": proposes.read, "read": read}
 
@@ -422,6 +422,9 @@ class BayesSim(InferenceMethod):
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
         return handed_on(ctx, self.inputs.prior)
 
+    def handed_on_round(self, ctx: RoundContext) -> int:
+        return handed_on_round(ctx, ctx.round)
+
     def stop_reason(self, ctx: RoundContext) -> str | None:
         guard = ctx.output("guard")
         if guard["action"] != "stop":
@@ -445,7 +448,7 @@ class BayesSim(InferenceMethod):
             "held_out": fitted["held_out"],
             "identifiability": {k: v for k, v in ctx.output("identifiability").items() if k != "seconds"},
             "guard": {**{k: guard[k] for k in ("ok", "failed", "near_real_data_only", "warnings", "action")},
-                      "handed_on": _round_name(guard["handed_on"]),
+                      "handed_on": handed_on_name(guard["handed_on"]),
                       "proposes_from": ProposalSource(guard["proposes_from"], guard["proposes_read"]).describe()},
             "dispersion": conditioned["dispersion"],
             "temperature": conditioned["temperature"],
@@ -454,9 +457,6 @@ class BayesSim(InferenceMethod):
             **{k: v for k, v in ctx.output("model_check").items() if k != "seconds"},
         }
 
-
-def _round_name(r: int) -> str:
-    return "the prior" if r == 0 else f"round {r}'s posterior"
 
 
 def bayessim(cfg: BayesSimConfig, inputs: MethodInputs) -> BayesSim:

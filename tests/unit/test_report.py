@@ -239,3 +239,38 @@ def test_ks_and_c2st_tell_calibrated_ranks_from_skewed_and_overconfident_ones():
         assert min(accuracies) > 0.62 and np.mean(accuracies) > 0.7
     assert c2st_accuracy(uniform[0][:9]) is None  # too few truths for five folds
     assert uniformity({"x": list(uniform[0])}, seed=0)["x"] == (ks[0], c2st[0])
+
+
+def test_tensorboard_hparams_compare_the_finished_jobs(sweep, capsys):
+    """One experiment summary in the sweep dir, one session per finished job with its configuration and final
+    metrics (what `tensorboard --logdir <sweep>` shows under HPARAMS); rewritten, not duplicated, by the report."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    from tensorboard.plugins.hparams import metadata
+
+    from bayessim_exp.report.hparams import write_hparams
+
+    def hparams_of(directory):
+        acc = EventAccumulator(str(directory)).Reload()
+        return acc, acc.PluginTagToContent(metadata.PLUGIN_NAME)
+
+    assert sorted(p.name for p in write_hparams(sweep)) == ["0_start_s0", "1_start_s1", "2_way_s0", "7_way_s2"]
+    assert main([str(sweep), "--no-posteriors"]) == 0  # writes them again
+    assert f"tensorboard --logdir {sweep}" in capsys.readouterr().out
+    assert len(list(sweep.glob("*/events.out.tfevents.*.hparams"))) == 4
+    assert len(list(sweep.glob("events.out.tfevents.*.hparams"))) == 1
+
+    _, root = hparams_of(sweep)
+    experiment = metadata.parse_experiment_plugin_data(root[metadata.EXPERIMENT_TAG])
+    infos = {h.name: h for h in experiment.hparam_infos}
+    assert {"task", "model", "summarizer", "seed", "real.truth", "debug", "configuration"} <= set(infos)
+    assert [v.string_value for v in infos["summarizer"].domain_discrete.values] == ["start", "waypoints"]
+    assert {m.name.tag for m in experiment.metric_infos} >= {"hparams/log_prob_gain", "hparams/surrogate_real_return"}
+
+    acc, tags = hparams_of(sweep / "2_way_s0")
+    start = metadata.parse_session_start_info_plugin_data(tags[metadata.SESSION_START_INFO_TAG])
+    assert start.hparams["summarizer"].string_value == "waypoints" and start.hparams["seed"].number_value == 0
+    assert start.hparams["configuration"].string_value == "summarizer=waypoints"
+    assert metadata.EXPERIMENT_TAG not in tags
+    assert [e.value for e in acc.Scalars("hparams/log_prob_gain")] == [2.0]
+    assert [e.value for e in acc.Scalars("hparams/surrogate_real_return")] == [-200.0]
+    assert not list((sweep / "3_way_s1").glob("*.hparams"))  # unfinished: no session

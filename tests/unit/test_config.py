@@ -125,3 +125,14 @@ def test_an_out_of_range_run_key_is_named_with_its_value(compose, override, mess
 
     with pytest.raises(ConfigError, match=f"^{message}$"):
         check_run_config(compose([override]))
+
+
+@pytest.mark.parametrize("overrides, name", [
+    ([], "Pendulum_bayessim_mdnn_start_random_seed0"),
+    (["method=sysid", "seed=3"], "Pendulum_sysid_random_seed3"),  # no model, no summarizer
+    (["method=simopt", "task=Cartpole"], "Cartpole_simopt_random_seed0"),
+    (["task=mjcf"], "two_link_arm_bayessim_mdnn_start_random_seed0"),  # the shipped arm, pkg://...
+    (["task=mjcf", "task.xml=myrobot/arm.xml"], "arm_bayessim_mdnn_start_random_seed0"),
+])
+def test_a_run_is_named_by_what_shaped_it(compose, overrides, name):
+    assert compose(overrides).run_name == name

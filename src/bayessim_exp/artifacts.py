@@ -1,7 +1,7 @@
 """Run directory layout and atomic writes: every finished stage survives a killed run.
 
     <run dir>/config.yaml           the composed config (a resumed run must match it)
-    <run dir>/results.json          what sweeps and reports read (see DESIGN.md)
+    <run dir>/results.json          what sweeps and reports read (README, 'Sweeps, launchers and reports')
     <run dir>/round_001/<stage>.pt  one artifact per finished stage, a data file (data_files.py)
     <run dir>/events.out.tfevents.* TensorBoard
 """

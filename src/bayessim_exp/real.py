@@ -15,6 +15,7 @@ import dataclasses
 import hashlib
 import io
 import logging
+import zipfile
 from pathlib import Path
 from typing import Protocol
 
@@ -139,12 +140,7 @@ class FileReal:
         self.task = task
         raw = self.path.read_bytes()  # read once: hashed and parsed
         self.fingerprint = hashlib.sha256(raw).hexdigest()
-        try:
-            with np.load(io.BytesIO(raw), allow_pickle=False) as data:
-                self._data = {k: data[k] for k in data.files}
-        except (OSError, ValueError) as exc:
-            raise DataError(f"{self.path}: not a readable npz file ({exc}); write it with "
-                            "bayessim_exp.real.save_trajectories or numpy.savez") from None
+        self._data = read_npz(raw, self.path)
         self.true_params = self._true_params()
         self._trajectories: Trajectories | None = None
 
@@ -179,6 +175,40 @@ class FileReal:
         return self._trajectories
 
 
+def read_npz(raw: bytes, path: Path) -> dict[str, np.ndarray]:
+    """An npz file's arrays, or one DataError saying what the file is instead (never numpy's advice to load
+    it with pickle: a shared file must not run code)."""
+    how = "write it with bayessim_exp.real.save_trajectories or numpy.savez"
+    if raw.startswith(b"\x93NUMPY"):
+        raise DataError(f"{path}: a single .npy array, not an npz archive of named arrays (states, actions, ...); {how}")
+    if not raw.startswith((b"PK\x03\x04", b"PK\x05\x06")):  # a zip archive's first bytes
+        raise DataError(f"{path}: not an npz file ({len(raw)} bytes, beginning {raw[:8]!r}); {how}")
+    data = {}
+    try:
+        with np.load(io.BytesIO(raw), allow_pickle=False) as archive:
+            for name in archive.files:
+                try:
+                    data[name] = archive[name]
+                except ValueError as exc:
+                    if "allow_pickle" not in str(exc):
+                        raise
+                    raise DataError(f"{path}: array {name!r} holds Python objects (dtype=object), which are not read; "
+                                    "save numeric arrays (and param_names as strings)") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise DataError(f"{path}: a damaged npz file ({type(exc).__name__}: {exc}); {how} again") from None
+    return data
+
+
+def _first_non_finite(array: np.ndarray, name: str, columns: list[str]) -> str | None:
+    """Where the first NaN or inf of an [n, T, k] array lies, in the file's terms."""
+    bad = np.argwhere(~np.isfinite(array))
+    if not len(bad):
+        return None
+    i, t, k = bad[0]
+    return (f"{name}[{i}, {t}, {k}] = {array[i, t, k]} (trajectory {i}, step {t}, {columns[k]}; "
+            f"{len(bad)} non-finite value(s) in {name})")
+
+
 def load_trajectories(data: dict, task: Task, horizon: int, where: str) -> Trajectories:
     """Validate recorded arrays against the task and cut them to `horizon` control steps."""
     for key in ("states", "actions"):
@@ -204,8 +234,10 @@ def load_trajectories(data: dict, task: Task, horizon: int, where: str) -> Traje
     if t1 - 1 < horizon:
         raise DataError(f"{where}: trajectories have {t1 - 1} steps, fewer than collect.horizon={horizon}; "
                         f"record longer trajectories or run with collect.horizon={t1 - 1} (the summarizer must fit in it)")
-    if not (np.isfinite(states).all() and np.isfinite(actions).all()):
-        raise DataError(f"{where}: states or actions contain NaN or inf")
+    found = (_first_non_finite(states, "states", list(task.obs_names))
+             or _first_non_finite(actions, "actions", list(task.action_names)))
+    if found:
+        raise DataError(f"{where}: {found}; drop or repair those trajectories")
     biggest = np.abs(actions).max(initial=0.0)
     if biggest > 1.0 + 1e-6:
         lo, hi = task.model.actuator_ctrlrange[task.actuators].T  # those the actions drive

@@ -70,25 +70,33 @@ def check_run_config(cfg: DictConfig) -> RunConfig:
         rc = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(RunConfig), top))
     except OmegaConfBaseException as exc:
         raise ConfigError(f"{exc.full_key}={exc.value!r}: {str(exc).splitlines()[0]}") from None
-    c = rc.collect
-    if rc.rounds < 1 or c.trajectories < 20 or c.horizon < 1 or c.chunk < 1:
-        raise ConfigError("need rounds >= 1, collect.trajectories >= 20, collect.horizon >= 1, collect.chunk >= 1")
-    if rc.logging.max_plot_params < 1 or rc.logging.plot_samples < 10:
-        raise ConfigError("need logging.max_plot_params >= 1, logging.plot_samples >= 10")
+    c, d, lg = rc.collect, rc.diagnostics, rc.logging
     try:
         torch.device(rc.device)
     except RuntimeError as exc:
         raise ConfigError(f"device={rc.device!r} is not a torch device: {exc}") from None
-    d = rc.diagnostics
-    if (not 0.0 <= d.held_out_fraction < 0.5 or d.coverage_samples < 10 or not all(0 < lv < 1 for lv in d.levels)
-            or d.predictive_sims < 0 or d.replay_sims == 1 or d.replay_sims < 0 or d.combination_sets < 0
-            or d.local_sets < 0 or d.sensitivity_sims < 0
-            or not 0 < d.mismatch_alpha < 1 or not 0 <= d.extrapolation_alpha < 1
-            or not 0 < d.mismatch_distance_ratio < 1):
-        raise ConfigError("need 0 <= diagnostics.held_out_fraction < 0.5, diagnostics.coverage_samples >= 10, "
-                          "diagnostics.levels in (0, 1), diagnostics.predictive_sims >= 0, diagnostics.combination_sets >= 0, "
-                          "diagnostics.local_sets >= 0, diagnostics.sensitivity_sims >= 0, "
-                          "diagnostics.replay_sims "
-                          "0 or >= 2, 0 < diagnostics.mismatch_alpha < 1, 0 <= diagnostics.extrapolation_alpha < 1, "
-                          "0 < diagnostics.mismatch_distance_ratio < 1")
+    # (key, value, acceptable, what is needed): the first unacceptable one is the error, named with its value
+    checks = [
+        ("rounds", rc.rounds, rc.rounds >= 1, ">= 1"),
+        ("collect.trajectories", c.trajectories, c.trajectories >= 20, ">= 20"),
+        ("collect.horizon", c.horizon, c.horizon >= 1, ">= 1"),
+        ("collect.chunk", c.chunk, c.chunk >= 1, ">= 1"),
+        ("logging.max_plot_params", lg.max_plot_params, lg.max_plot_params >= 1, ">= 1"),
+        ("logging.plot_samples", lg.plot_samples, lg.plot_samples >= 10, ">= 10"),
+        ("diagnostics.held_out_fraction", d.held_out_fraction, 0.0 <= d.held_out_fraction < 0.5, "in [0, 0.5)"),
+        ("diagnostics.coverage_samples", d.coverage_samples, d.coverage_samples >= 10, ">= 10"),
+        ("diagnostics.levels", d.levels, all(0 < lv < 1 for lv in d.levels), "each in (0, 1)"),
+        ("diagnostics.predictive_sims", d.predictive_sims, d.predictive_sims >= 0, ">= 0"),
+        ("diagnostics.replay_sims", d.replay_sims, d.replay_sims == 0 or d.replay_sims >= 2, "0 (off) or >= 2"),
+        ("diagnostics.combination_sets", d.combination_sets, d.combination_sets >= 0, ">= 0"),
+        ("diagnostics.local_sets", d.local_sets, d.local_sets >= 0, ">= 0"),
+        ("diagnostics.sensitivity_sims", d.sensitivity_sims, d.sensitivity_sims >= 0, ">= 0"),
+        ("diagnostics.mismatch_alpha", d.mismatch_alpha, 0 < d.mismatch_alpha < 1, "in (0, 1)"),
+        ("diagnostics.extrapolation_alpha", d.extrapolation_alpha, 0 <= d.extrapolation_alpha < 1, "in [0, 1)"),
+        ("diagnostics.mismatch_distance_ratio", d.mismatch_distance_ratio, 0 < d.mismatch_distance_ratio < 1,
+         "in (0, 1)"),
+    ]
+    for key, value, ok, needed in checks:
+        if not ok:
+            raise ConfigError(f"{key}={value}: need {key} {needed}")
     return rc

@@ -31,7 +31,7 @@ RUN_ELSEWHERE = {
         "task=ShadowHand_more", "model=mdnn_projected_diagonal_one_component": "task=Humanoid",
     "model=mdnn_projected_gaussian_ensemble": "task=ShadowHand",
 }
-# built only: MJX compiles a model for about a minute on CPU (DESIGN.md, Known traps), too slow for every CI run
+# built only: MJX compiles a model for about a minute on CPU (README, 'Install and test'), too slow for every CI run
 BUILD_ONLY = ["sim=mjx"]
 
 

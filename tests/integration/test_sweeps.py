@@ -53,19 +53,27 @@ def test_jobs_of_the_local_launcher_finish_with_their_figures(tmp_path):
 
 
 def test_a_multirun_sweep_and_its_report(tmp_path):
+    """Seeds at the task's own truth and seeds at truths drawn from the prior: only the latter get a calibration
+    section, with KS numbers; the sweep's end prints the report command and leaves TensorBoard hparams per job."""
     sweep = tmp_path / "sweep"
-    proc = cli("--multirun", "summarizer=start,waypoints", "seed=0,1", "debug=smoke", f"hydra.sweep.dir={sweep}",
+    proc = cli("--multirun", "real.truth=task,prior", "seed=0,1", "debug=smoke", f"hydra.sweep.dir={sweep}",
                cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    assert f"python -m bayessim_exp.report {sweep}" in proc.stdout.splitlines()[-1]
+    assert len(list(sweep.glob("*_seed*/events.out.tfevents.*.hparams"))) == 4
     report = subprocess.run([sys.executable, "-m", "bayessim_exp.report", str(sweep)], env=ENV, capture_output=True,
                             text=True, timeout=300)
     assert report.returncode == 0, report.stderr[-3000:]
     assert "4 jobs: 4 finished, 0 failed, 0 unfinished" in report.stdout
     markdown = (sweep / "report" / "report.md").read_text()
-    assert re.search(r"^\| summarizer=start \| 2 \| .+ \|$", markdown, re.M)
-    assert re.search(r"^\| summarizer=waypoints \| 2 \| .+ \|$", markdown, re.M)
+    assert re.search(r"^\| real.truth=task \| 2 \| .+ \|$", markdown, re.M)
+    assert re.search(r"^\| real.truth=prior \| 2 \| .+ \|$", markdown, re.M)
+    assert "`real.truth=task`: 2 job(s) at one truth (real.truth=task): no calibration section" in markdown
+    calibration = markdown[markdown.index("## Calibration"):]
+    assert "### `real.truth=prior`" in calibration and "real.truth=task" not in calibration
+    assert re.search(r"^\| mass \| [0-9.e-]+ \| – \|$", calibration, re.M)  # KS; C2ST needs 10 truths
     pngs = sorted(p.name for p in (sweep / "report").glob("*.png"))
-    assert {"log_prob_gain.png", "gain_by_round.png", "posterior_00.png", "posterior_01.png"} <= set(pngs)
+    assert {"log_prob_gain.png", "gain_by_round.png", "posterior_00.png", "posterior_01.png", "sbc_ranks_00.png"} <= set(pngs)
     rows = (sweep / "report" / "jobs.csv").read_text().splitlines()
     assert len(rows) == 5 and all(",finished," in row for row in rows[1:])
 

@@ -111,3 +111,28 @@ def test_the_command_line_beats_a_task_default(compose, override, key, value):
 def test_an_experiment_beats_a_task_default(compose):
     cfg = compose(["task=Ant", "experiment=bayessimig_pendulum"])
     assert (cfg.task.name, cfg.summarizer.name, cfg.model.covariance) == ("Ant", "start", "full")
+
+
+@pytest.mark.parametrize("override, message", [
+    ("rounds=0", "rounds=0: need rounds >= 1"),
+    ("collect.trajectories=5", "collect.trajectories=5: need collect.trajectories >= 20"),
+    ("diagnostics.replay_sims=1", r"diagnostics.replay_sims=1: need diagnostics.replay_sims 0 \(off\) or >= 2"),
+    ("diagnostics.levels=[0.5,1.5]", r"diagnostics.levels=\[0.5, 1.5\]: need diagnostics.levels each in \(0, 1\)"),
+])
+def test_an_out_of_range_run_key_is_named_with_its_value(compose, override, message):
+    from bayessim_exp.errors import ConfigError
+    from bayessim_exp.run_config import check_run_config
+
+    with pytest.raises(ConfigError, match=f"^{message}$"):
+        check_run_config(compose([override]))
+
+
+@pytest.mark.parametrize("overrides, name", [
+    ([], "Pendulum_bayessim_mdnn_start_random_seed0"),
+    (["method=sysid", "seed=3"], "Pendulum_sysid_random_seed3"),  # no model, no summarizer
+    (["method=simopt", "task=Cartpole"], "Cartpole_simopt_random_seed0"),
+    (["task=mjcf"], "two_link_arm_bayessim_mdnn_start_random_seed0"),  # the shipped arm, pkg://...
+    (["task=mjcf", "task.xml=myrobot/arm.xml"], "arm_bayessim_mdnn_start_random_seed0"),
+])
+def test_a_run_is_named_by_what_shaped_it(compose, overrides, name):
+    assert compose(overrides).run_name == name

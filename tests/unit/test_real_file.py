@@ -32,6 +32,10 @@ def _build(compose, tmp_path, path, *extra):
     ({"dt": np.array(0.01)}, r"dt=0.01 s but task Pendulum runs at 0.05 s; resample"),
     ({"states": np.zeros((31, 3)), "actions": np.zeros((30, 1))}, r"without its leading axis.*states\[None\]"),
     ({"states": np.zeros((2, 11, 3)), "actions": np.zeros((2, 10, 1))}, r"10 steps, fewer than .*collect.horizon=10"),
+    ({"states": np.where(np.arange(31)[None, :, None] == 17, np.nan, np.zeros((2, 31, 3)))},
+     r"states\[0, 17, 0\] = nan \(trajectory 0, step 17, cos_theta; 6 non-finite value\(s\) in states\); drop or"),
+    ({"actions": np.where(np.arange(30)[None, :, None] == 3, np.inf, np.zeros((2, 30, 1)))},
+     r"actions\[0, 3, 0\] = inf \(trajectory 0, step 3, torque; 2 non-finite"),
 ])
 def test_a_malformed_file_is_refused_before_any_simulation_saying_how_to_fix_it(compose, tmp_path, monkeypatch,
                                                                                change, message):
@@ -67,3 +71,35 @@ def test_a_run_dir_made_from_other_data_is_refused(compose, tmp_path):
     _file(tmp_path, n=3)  # same path, new contents
     with pytest.raises(ConfigError, match="made from other real data.*the file changed"):
         _build(compose, tmp_path, path)
+
+
+def _raw(tmp_path, content):
+    path = tmp_path / "robot.npz"
+    path.write_bytes(content)
+    return path
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"time,theta\n0,0.1\n", r"not an npz file \(17 bytes, beginning b'time,the'\)"),
+    (b"", r"not an npz file \(0 bytes"),
+    ("npy", r"a single \.npy array, not an npz archive"),
+    ("truncated", r"a damaged npz file \(BadZipFile"),
+    ("object", r"array 'states' holds Python objects \(dtype=object\), which are not read"),
+])
+def test_an_unreadable_file_is_named_without_numpys_pickle_advice(compose, tmp_path, content, message):
+    import io
+
+    good = _file(tmp_path, name="good.npz").read_bytes()
+    if content == "npy":
+        buffer = io.BytesIO()
+        np.save(buffer, np.zeros((2, 31, 3)))
+        content = buffer.getvalue()
+    elif content == "truncated":
+        content = good[: len(good) // 2]
+    elif content == "object":
+        buffer = io.BytesIO()
+        np.savez(buffer, states=np.array([{"theta": 0.1}], dtype=object), actions=np.zeros((2, 30, 1)))
+        content = buffer.getvalue()
+    with pytest.raises(DataError, match=message) as error:
+        _build(compose, tmp_path, _raw(tmp_path, content))
+    assert "allow_pickle" not in str(error.value) and "unsafely" not in str(error.value)

@@ -3,6 +3,7 @@
 import csv
 import json
 import os
+import re
 import time
 
 import pytest
@@ -128,10 +129,12 @@ def test_a_job_with_a_null_gain_is_counted_and_named_not_averaged_away(tmp_path)
     assert "`all`, `log_prob_gain`: `1_s1`: **the final posterior put zero density at the truth**" in markdown
 
 
-def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False, outside=False):
+def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False, outside=False, source="prior"):
     """A known-truth job: one round record per HPD level of the truth; `outside`: its last round's real data lay
-    outside the training simulations."""
-    out = {**results(seed, [gain] * len(levels)), "truth_source": "prior"}
+    outside the training simulations. Its truth is the task's (seed 0's) unless drawn from the prior or nominal."""
+    out = {**results(seed, [gain] * len(levels)), "truth_source": source}
+    if source != "task":
+        out["true_params"] = {"a": 1.0 + 0.01 * seed, "b": 2.0}
     for record, level in zip(out["rounds"], levels):
         record["truth"] = {"hpd_level": level, "marginal_rank": dict(zip(["a", "b"], ranks))}
         record["guard"] = {"ok": not guard_failed, "failed": guard_failed, "warnings": [],
@@ -173,9 +176,101 @@ def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_
     assert "**1 final posterior(s) put zero density at the truth**" in markdown
     assert "Real data outside the training simulations (a guard failure): 2/200 = 0.01 [0.00, 0.04]" in markdown
     assert (sweep / "report" / "sbc_ranks_00.png").stat().st_size > 1000
+    # a's ranks are evenly spread (uniform), b's all 0.5 (a posterior centred on every truth, too wide)
+    with (sweep / "report" / "sbc.csv").open() as f:
+        sbc = {r["parameter"]: r for r in csv.DictReader(f)}
+    assert sbc["a"]["truths"] == "100" and float(sbc["a"]["ks_pvalue"]) > 0.99 and float(sbc["b"]["ks_pvalue"]) < 1e-20
+    assert 0.4 < float(sbc["a"]["c2st_accuracy"]) < 0.6 and float(sbc["b"]["c2st_accuracy"]) > 0.9
+    assert re.search(r"^\| a \| 1 \| 0\.[45]\d \|$", markdown, re.M)
+    assert "as sbi's `check_sbc` reports it" in markdown and "fewer than 100 truths" not in markdown
 
 
 def test_a_sweep_without_known_truths_has_no_calibration_section(sweep):
     build_report(sweep, posteriors=False)
     assert "Calibration" not in (sweep / "report" / "report.md").read_text()
     assert not (sweep / "report" / "calibration.csv").exists()
+
+
+def test_seeds_repeated_at_one_truth_get_no_calibration_section(tmp_path):
+    """`--multirun seed=0,1` at the task's own truth: every job knows its truth, but it is the same one; the report
+    says so instead of counting '2 truths' with a per-round table, SBC histograms and uniformity tests."""
+    sweep = tmp_path / "sweep"
+    for seed in range(2):
+        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}"],
+                 result=truth_results(seed, [0.3, 0.4], [0.2, 0.7], source="task"))
+    build_report(sweep, posteriors=False)
+    markdown = (sweep / "report" / "report.md").read_text()
+    assert "Calibration" not in markdown and "2 truths" not in markdown
+    assert "`all`: 2 job(s) at one truth (real.truth=task): no calibration section" in markdown
+    assert not any((sweep / "report" / name).exists() for name in ("calibration.csv", "sbc.csv", "sbc_ranks_00.png"))
+
+
+def test_nominal_truths_get_the_section_without_uniformity_tests(tmp_path):
+    """Truths at the MJCF's values, a few moved, vary but are not prior draws: their ranks need not be uniform."""
+    sweep = tmp_path / "sweep"
+    for seed in range(12):
+        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}"],
+                 result=truth_results(seed, [0.3, 0.4], [0.2, 0.7], source="nominal"))
+    build_report(sweep, posteriors=False)
+    markdown = (sweep / "report" / "report.md").read_text()
+    assert "## Calibration (known truths)" in markdown and "12 truths (nominal" in markdown
+    assert "SBC uniformity tests: not computed, the truths were not drawn from the prior" in markdown
+    assert (sweep / "report" / "calibration.csv").exists() and not (sweep / "report" / "sbc.csv").exists()
+
+
+def test_ks_and_c2st_tell_calibrated_ranks_from_skewed_and_overconfident_ones():
+    """Known answers over 40 studies of 100 truths each: ranks drawn uniform pass (KS p below 0.05 in about 5 %
+    of studies, C2ST near 0.5), ranks of posteriors biased low (Beta(5, 1)) or too narrow (Beta(0.2, 0.2): ranks
+    piled at 0 and 1) fail in every study; a Bayes classifier reaches 0.77 and 0.76 on these two."""
+    import numpy as np
+
+    from bayessim_exp.report.sbc import c2st_accuracy, ks_pvalue, uniformity
+
+    rng = np.random.default_rng(1)
+    uniform = [rng.uniform(size=100) for _ in range(40)]
+    ks = [ks_pvalue(r) for r in uniform]
+    c2st = [c2st_accuracy(r, seed=s) for s, r in enumerate(uniform)]
+    assert sum(p < 0.05 for p in ks) <= 6  # binomial(40, 0.05): P(> 6) < 0.005
+    assert abs(np.mean(c2st) - 0.5) < 0.03 and max(c2st) < 0.66
+    for a, b in ((5.0, 1.0), (0.2, 0.2)):
+        studies = [rng.beta(a, b, 100) for _ in range(40)]
+        assert max(ks_pvalue(r) for r in studies) < 0.01
+        accuracies = [c2st_accuracy(r, seed=s) for s, r in enumerate(studies)]
+        assert min(accuracies) > 0.62 and np.mean(accuracies) > 0.7
+    assert c2st_accuracy(uniform[0][:9]) is None  # too few truths for five folds
+    assert uniformity({"x": list(uniform[0])}, seed=0)["x"] == (ks[0], c2st[0])
+
+
+def test_tensorboard_hparams_compare_the_finished_jobs(sweep, capsys):
+    """One experiment summary in the sweep dir, one session per finished job with its configuration and final
+    metrics (what `tensorboard --logdir <sweep>` shows under HPARAMS); rewritten, not duplicated, by the report."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    from tensorboard.plugins.hparams import metadata
+
+    from bayessim_exp.report.hparams import write_hparams
+
+    def hparams_of(directory):
+        acc = EventAccumulator(str(directory)).Reload()
+        return acc, acc.PluginTagToContent(metadata.PLUGIN_NAME)
+
+    assert sorted(p.name for p in write_hparams(sweep)) == ["0_start_s0", "1_start_s1", "2_way_s0", "7_way_s2"]
+    assert main([str(sweep), "--no-posteriors"]) == 0  # writes them again
+    assert f"tensorboard --logdir {sweep}" in capsys.readouterr().out
+    assert len(list(sweep.glob("*/events.out.tfevents.*.hparams"))) == 4
+    assert len(list(sweep.glob("events.out.tfevents.*.hparams"))) == 1
+
+    _, root = hparams_of(sweep)
+    experiment = metadata.parse_experiment_plugin_data(root[metadata.EXPERIMENT_TAG])
+    infos = {h.name: h for h in experiment.hparam_infos}
+    assert {"task", "model", "summarizer", "seed", "real.truth", "debug", "configuration"} <= set(infos)
+    assert [v.string_value for v in infos["summarizer"].domain_discrete.values] == ["start", "waypoints"]
+    assert {m.name.tag for m in experiment.metric_infos} >= {"hparams/log_prob_gain", "hparams/surrogate_real_return"}
+
+    acc, tags = hparams_of(sweep / "2_way_s0")
+    start = metadata.parse_session_start_info_plugin_data(tags[metadata.SESSION_START_INFO_TAG])
+    assert start.hparams["summarizer"].string_value == "waypoints" and start.hparams["seed"].number_value == 0
+    assert start.hparams["configuration"].string_value == "summarizer=waypoints"
+    assert metadata.EXPERIMENT_TAG not in tags
+    assert [e.value for e in acc.Scalars("hparams/log_prob_gain")] == [2.0]
+    assert [e.value for e in acc.Scalars("hparams/surrogate_real_return")] == [-200.0]
+    assert not list((sweep / "3_way_s1").glob("*.hparams"))  # unfinished: no session

@@ -4,6 +4,7 @@ import argparse
 import sys
 
 from .build import build_report
+from .hparams import write_hparams
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -23,6 +24,13 @@ def main(argv: list[str] | None = None) -> int:
         if job.status != "finished":
             print(f"  {job.status}: {job.path}: {job.problem}")
     print(f"wrote {report.out_dir}/report.md, summary.csv, jobs.csv and {len(report.figures)} PNGs")
+    try:
+        written = write_hparams(args.sweep_dir)
+    except Exception as exc:  # noqa: BLE001 - the report stands without TensorBoard's view
+        print(f"TensorBoard hparams not written: {type(exc).__name__}: {exc}", file=sys.stderr)
+    else:
+        if written:
+            print(f"wrote TensorBoard hparams of {len(written)} finished jobs: tensorboard --logdir {args.sweep_dir}")
     return 0
 
 

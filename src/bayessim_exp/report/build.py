@@ -1,5 +1,6 @@
 """Build a sweep's report: report.md, summary.csv (per configuration), jobs.csv (per job) and PNGs, and for a
-known-truth study calibration.csv with the calibration section (calibration.py).
+known-truth study (truths that vary over its jobs) calibration.csv and, over truths drawn from the prior, sbc.csv
+with the calibration section (calibration.py).
 
 Failed and unfinished jobs are listed, never fatal: the tables use the finished jobs only, and a
 figure that cannot be drawn is named in the report with the reason. Every mean says how many values it
@@ -91,9 +92,14 @@ def build_report(sweep_dir: str | Path, out_dir: str | Path | None = None, poste
                + ["missing values"], summary_rows)
     studies = {c: calibration_section.calibration(d) for c, d in configs.items()}
     studies = {c: study for c, study in studies.items() if study is not None}
+    fixed = {c: calibration_section.fixed_truth(d) for c, d in configs.items() if c not in studies}
+    fixed = {c: why for c, why in fixed.items() if why is not None}
     if studies:
         _write_csv(out / "calibration.csv", calibration_section.CSV_HEADER,
                    [calibration_section.csv_row(c, study) for c, study in studies.items()])
+        sbc_rows = [row for c, study in studies.items() for row in calibration_section.sbc_rows(c, study)]
+        if sbc_rows:
+            _write_csv(out / "sbc.csv", calibration_section.SBC_CSV_HEADER, sbc_rows)
     _write_csv(out / "jobs.csv", ["job", "configuration", "seed", "status", "problem"] + [m.key for m in metrics],
                [[j.path.relative_to(sweep_dir).as_posix() or ".", labels[j.path], j.seed, j.status, j.problem]
                 + [_fmt(per_job.get(j.path, {}).get(m.key)) for m in metrics] for j in jobs])
@@ -117,12 +123,14 @@ def build_report(sweep_dir: str | Path, out_dir: str | Path | None = None, poste
                 problems.append(f"posterior of `{config}` ({done[0].path.name}): {type(exc).__name__}: {exc}")
     report = Report(out, jobs, figures, problems)
     lines = _markdown(sweep_dir, report, configs, metrics, values, missing)
+    if fixed:
+        lines += ["", "## Known truths", ""] + [f"- `{c}`: {why}" for c, why in fixed.items()]
     if studies:
         lines += ["", "## Calibration (known truths)", "",
                   "Where each job's truth lies in its final posterior (sweeps/calibration.yaml draws the truths from "
                   "the prior, sweeps/nominal.yaml puts them at the MJCF's values with a few moved): a calibrated "
                   "pipeline holds about L of them in its level-L regions, and over truths drawn from the prior its SBC "
-                  "rank histograms are flat within the grey band.", ""]
+                  "rank histograms are flat within the grey band (KS p-values and C2ST accuracies below each).", ""]
         for config, study in studies.items():
             lines += calibration_section.markdown(config, study, rank_figures[config])
     (out / "report.md").write_text("\n".join(lines) + "\n")

@@ -1,6 +1,8 @@
 """The report's calibration section: where the truth lies in the final posterior, over the jobs of a
 known-truth study (sweeps/calibration.yaml: each seed's surrogate parameters drawn from the prior;
 sweeps/nominal.yaml: the MJCF's values, a few moved, what real robots look like; results.json's `truth_source`).
+Only for a configuration whose jobs hold at least two different truths (results.json's `true_params`): seeds
+repeated at one truth (real.truth=task, the default) say how a run varies, not whether its posteriors are calibrated.
 
 Read from each round record's `truth` (diagnostics/scoring.py): `hpd_level`, the share of posterior draws
 denser than the truth (inside the level-L region iff below L; null, zero density, counts as outside), and
@@ -11,7 +13,8 @@ count of zero densities); how often the guard failed or handed on another distri
 how often the
 mismatch flag fired, in the final round and in any round; in how many rounds the real data lay outside the
 training simulations (diagnostics/extrapolation.py: with truths from the prior, its false alarms); and one PNG of SBC rank histograms per parameter
-of the final round, each with the binomial 99 % band of a uniform histogram.
+of the final round, each with the binomial 99 % band of a uniform histogram; where every truth was drawn from the
+prior, per parameter the KS p-value and C2ST accuracy of those ranks against uniform ones (sbc.py).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from . import sbc
 from .jobs import Job
 
 LEVELS = (0.5, 0.9)
@@ -36,6 +40,7 @@ _SOURCES = {"prior": "drawn from the prior", "nominal": "nominal: the MJCF's val
 @dataclasses.dataclass
 class Calibration:
     jobs: int  # finished jobs that know their truth
+    truths: int  # different truths among them
     left_out: int  # finished jobs without a truth (a fixed or unknown one)
     inside: dict[float, list[tuple[int, int]]]  # level -> per round (truths inside, jobs with that round)
     gains: list[float | None]  # final round's gain at the truth
@@ -48,6 +53,7 @@ class Calibration:
     flagged_any: int
     outside_rounds: tuple[int, int]  # rounds whose real data lay outside the training simulations, rounds checked
     ranks: dict[str, list[float]]  # parameter -> final round's marginal ranks
+    uniformity: dict[str, tuple[float, float | None]] | None  # parameter -> (KS p, C2ST); None: truths not from the prior
 
 
 def clopper_pearson(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float]:
@@ -58,10 +64,32 @@ def clopper_pearson(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[flo
     return low, high
 
 
+def _known(jobs: list[Job]) -> list[Job]:
+    return [j for j in jobs if j.results and j.results["rounds"] and j.results["rounds"][-1].get("truth")]
+
+
+def _truth(job: Job) -> tuple:
+    values = job.results.get("true_params") or {}
+    return tuple(sorted((name, round(float(v), 9)) for name, v in values.items()))
+
+
+def fixed_truth(jobs: list[Job]) -> str | None:
+    """Why a configuration gets no calibration section although its jobs know their truth (all at one truth);
+    None otherwise."""
+    known = _known(jobs)
+    if not known or len({_truth(j) for j in known}) > 1:
+        return None
+    sources = sorted({str(j.results.get("truth_source")) for j in known})
+    return (f"{len(known)} job(s) at one truth (real.truth={'/'.join(sources)}): no calibration section; a known-truth "
+            "study varies the truth per seed (real.truth=prior: sweeps/calibration.yaml, or nominal)")
+
+
 def calibration(jobs: list[Job]) -> Calibration | None:
-    """The section's numbers over finished jobs whose rounds carry `truth`; None when none does."""
-    known = [j for j in jobs if j.results and j.results["rounds"] and j.results["rounds"][-1].get("truth")]
-    if not known:
+    """The section's numbers over finished jobs whose rounds carry `truth`; None when none does or when they all
+    share one truth."""
+    known = _known(jobs)
+    truths = len({_truth(j) for j in known})
+    if truths < 2:
         return None
     rounds = max(len(j.results["rounds"]) for j in known)
     inside: dict[float, list[tuple[int, int]]] = {level: [] for level in LEVELS}
@@ -84,18 +112,21 @@ def calibration(jobs: list[Job]) -> Calibration | None:
         return bool((record.get("mismatch") or {}).get("flagged"))
 
     checked = [r["extrapolation"] for j in known for r in j.results["rounds"] if r.get("extrapolation")]
+    sources = sorted({str(j.results.get("truth_source")) for j in known})
 
     return Calibration(
-        jobs=len(known), left_out=sum(1 for j in jobs if j.results) - len(known), inside=inside,
+        jobs=len(known), truths=truths, left_out=sum(1 for j in jobs if j.results) - len(known), inside=inside,
         gains=[f.get("log_prob_gain") for f in finals],
         guard_failed_final=sum(guard_failed(f) for f in finals),
         guard_failed_any=sum(any(guard_failed(r) for r in j.results["rounds"]) for j in known),
         handed_on_other=sum((f.get("guard") or {}).get("action") in ("fallback", "provisional") for f in finals),
         handed_on_prior=sum((f.get("guard") or {}).get("handed_on") == "the prior" for f in finals),
-        sources=sorted({str(j.results.get("truth_source")) for j in known}),
+        sources=sources,
         flagged_final=sum(flagged(f) for f in finals),
         flagged_any=sum(any(flagged(r) for r in j.results["rounds"]) for j in known),
-        outside_rounds=(sum(bool(e["flagged"]) for e in checked), len(checked)), ranks=ranks)
+        outside_rounds=(sum(bool(e["flagged"]) for e in checked), len(checked)), ranks=ranks,
+        # uniform ranks are what a calibrated pipeline gives over truths drawn from the prior, and only there
+        uniformity=sbc.uniformity(ranks) if sources == ["prior"] else None)
 
 
 def share_text(k: int, n: int) -> str:
@@ -110,7 +141,8 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
     quartiles = np.percentile(gains, [25, 50, 75]) if gains else [math.nan] * 3
     final = {level: c.inside[level][-1] for level in LEVELS}
     lines = [f"### `{config}`", "",
-             f"{c.jobs} truths ({', '.join(_SOURCES.get(s, s) for s in c.sources)})"
+             (f"{c.jobs} truths" if c.truths == c.jobs else f"{c.jobs} jobs at {c.truths} different truths")
+             + f" ({', '.join(_SOURCES.get(s, s) for s in c.sources)})"
              + (f" ({c.left_out} finished jobs without a known truth left out)" if c.left_out else "")
              + ". Share of truths inside the final posterior's highest-density regions (Clopper-Pearson "
              f"{CONFIDENCE:.0%} interval): " + "; ".join(f"{level:.0%} region {share_text(*final[level])}"
@@ -131,11 +163,36 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
               + (f"{share_text(*c.outside_rounds)} of the rounds checked." if c.outside_rounds[1] else "not checked.")]
     if figure is not None:
         lines += ["", f"![SBC ranks of `{config}`]({figure.name})"]
+    lines += [""] + uniformity_markdown(c)
     return lines + [""]
 
 
+def uniformity_markdown(c: Calibration) -> list[str]:
+    if c.uniformity is None:
+        return ["SBC uniformity tests: not computed, the truths were not drawn from the prior (only over prior draws "
+                "are a calibrated pipeline's ranks uniform)."]
+    lines = [f"Uniformity of the final round's SBC ranks over {c.jobs} truths, as sbi's `check_sbc` reports it: the "
+             "Kolmogorov-Smirnov p-value against U(0, 1) (small: not uniform; with D parameters expect the smallest "
+             f"of D uniform p-values near 1/(D+1)) and the C2ST accuracy telling the ranks from uniform draws (0.5: "
+             f"indistinguishable; a chance classifier's spread is about {0.5 / math.sqrt(2 * c.jobs):.2f} here)"
+             + ("; **fewer than 100 truths**: both tests have little power" if c.jobs < 100 else "")
+             + (f"; no C2ST below {sbc.MIN_C2ST} truths" if c.jobs < sbc.MIN_C2ST else "") + ".", "",
+             "| parameter | KS p-value | C2ST accuracy |", "|---|---|---|"]
+    for name, (p, accuracy) in c.uniformity.items():
+        lines.append(f"| {name} | {p:.3g} | {'–' if accuracy is None else f'{accuracy:.2f}'} |")
+    return lines
+
+
+SBC_CSV_HEADER = ["configuration", "parameter", "truths", "ks_pvalue", "c2st_accuracy"]
+
+
+def sbc_rows(config: str, c: Calibration) -> list[list]:
+    return [[config, name, c.jobs, f"{p:.4g}", "" if accuracy is None else f"{accuracy:.4f}"]
+            for name, (p, accuracy) in (c.uniformity or {}).items()]
+
+
 def csv_row(config: str, c: Calibration) -> list:
-    row: list = [config, c.jobs]
+    row: list = [config, c.jobs, c.truths]
     for level in LEVELS:
         k, n = c.inside[level][-1]
         row += [k, n, f"{k / n:.4f}", *(f"{v:.4f}" for v in clopper_pearson(k, n))]
@@ -145,7 +202,7 @@ def csv_row(config: str, c: Calibration) -> list:
     return row
 
 
-CSV_HEADER = ["configuration", "truths",
+CSV_HEADER = ["configuration", "truths", "different_truths",
               *(f"{name}_{level:g}" for level in LEVELS for name in ("inside", "rounds_of", "share", "ci_low", "ci_high")),
               "gain_above_zero", "zero_density", "guard_failed_final", "guard_failed_any", "fallback_final", "prior_final",
               "flagged_final", "flagged_any", "outside_rounds", "rounds_checked"]

@@ -168,7 +168,7 @@ def test_train_evaluate_finetune_outside_the_pipeline(compose, tmp_path):
 
 
 def test_nominal_values_leave_the_model_as_written(pendulum):
-    from bayessim_exp.rl.video import model_with_params
+    from bayessim_exp.tasks.parameterized import model_with_params
 
     model = model_with_params(pendulum, pendulum.spec.nominal)
     assert np.allclose(model.body_mass, pendulum.model.body_mass)

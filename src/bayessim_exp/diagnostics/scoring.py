@@ -17,7 +17,7 @@ import math
 import numpy as np
 import torch
 
-from ..distributions.base import ParameterDistribution
+from ..distributions.base import QUANTILE_LEVELS, ParameterDistribution
 from ..distributions.hpd import hpd_level
 
 
@@ -38,14 +38,29 @@ def truth_rank(posterior: ParameterDistribution, names: list[str], true: np.ndar
             "marginal_rank": dict(zip(names, (draws < t).double().mean(0).tolist()))}
 
 
+def quantile_key(level: float) -> str:
+    """The name of a quantile level in results.json and the exports: 0.05 -> "q05", 0.995 -> "q99.5"."""
+    percent = round(100 * level, 6)
+    return f"q{int(percent):02d}" if percent == int(percent) else f"q{percent:g}"
+
+
+def quantile_table(dist: ParameterDistribution, names: list[str],
+                   levels: tuple[float, ...] = QUANTILE_LEVELS) -> dict[str, dict[str, float]]:
+    """{"q05": {name: value}, "q50": ..., "q95": ...}: per-parameter quantiles (ParameterDistribution.quantiles)."""
+    q = dist.quantiles(levels)
+    return {quantile_key(level): dict(zip(names, row.tolist())) for level, row in zip(levels, q)}
+
+
 def score(posterior: ParameterDistribution, prior: ParameterDistribution, names: list[str],
           true: np.ndarray | None, seed: int = 0) -> dict:
-    """Moments, `contraction` (per parameter 1 - posterior variance / prior variance: 0 where the data taught
-    nothing, 1 where they pin it down; beside the identifiability report's R^2), and where the truth lies."""
+    """Moments, 5/50/95 % quantiles, `contraction` (per parameter 1 - posterior variance / prior variance: 0 where
+    the data taught nothing, 1 where they pin it down; beside the identifiability report's R^2), and where the
+    truth lies."""
     post_std, prior_std = posterior.stddev.double(), prior.stddev.double()
     out = {
         "posterior_mean": dict(zip(names, posterior.mean.double().tolist())),
         "posterior_std": dict(zip(names, post_std.tolist())),
+        "posterior_quantiles": quantile_table(posterior, names),
         "prior_std": dict(zip(names, prior_std.tolist())),
         "contraction": dict(zip(names, (1 - (post_std / prior_std) ** 2).tolist())),
         "log_prob_true_posterior": None, "log_prob_true_prior": None, "log_prob_gain": None, "truth": None,

@@ -7,6 +7,7 @@ never switch on the concrete class:
     sample(shape, generator=None) -> float64 [*shape, D]
     log_prob(theta)       -> float64 [...], -inf outside the support
     mean, stddev          float64 [D]; Monte Carlo with a fixed seed unless a subclass knows them exactly
+    quantiles(levels)     float64 [L, D] per-parameter quantiles; exact for independent ones, else from those draws
     superlevel_box(level) a box around {log_prob >= level}, or None (truncated proposals sample within it)
     effective_sample_size the draws an importance-sampling estimate rests on; None where exact
     gaussian_factor()     the Gaussian the density is on its support, for the SNPE-A correction's closed form
@@ -24,6 +25,7 @@ import functools
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 
 from ..data_files import load_state, save_state
@@ -32,6 +34,8 @@ from ..errors import DataFileError
 # draws behind Monte Carlo moments: the standard error of the mean is stddev / 140
 _MOMENT_DRAWS = 20_000
 _MOMENT_SEED = 12345
+# the per-parameter quantiles results.json and the exports give (5, 50 and 95 %)
+QUANTILE_LEVELS = (0.05, 0.5, 0.95)
 # gaussian_factor's answer where the density is neither a Gaussian's nor constant on its support
 NOT_GAUSSIAN = "not Gaussian"
 
@@ -103,10 +107,27 @@ class ParameterDistribution:
         """A point of largest density (of an independent distribution, on its support)."""
         raise NotImplementedError(f"{type(self).__name__} has no independent marginals")
 
+    def _moment_draws(self) -> torch.Tensor:
+        return self.sample((_MOMENT_DRAWS,), generator=torch.Generator().manual_seed(_MOMENT_SEED)).double()
+
     @functools.cached_property
-    def _moments(self) -> tuple[torch.Tensor, torch.Tensor]:
-        draws = self.sample((_MOMENT_DRAWS,), generator=torch.Generator().manual_seed(_MOMENT_SEED)).double()
-        return draws.mean(0), draws.std(0)
+    def _moments(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, std and the QUANTILE_LEVELS quantiles of one set of draws (sampling may cost: done once)."""
+        draws = self._moment_draws()
+        return draws.mean(0), draws.std(0), _quantiles(draws, QUANTILE_LEVELS)
+
+    def quantiles(self, levels: tuple[float, ...] = QUANTILE_LEVELS) -> torch.Tensor:
+        """Per-parameter quantiles [len(levels), D]: exact (marginal_icdf) for independent distributions, else from
+        the draws behind the Monte Carlo moments."""
+        levels = tuple(float(q) for q in levels)
+        if not all(0.0 <= q <= 1.0 for q in levels):
+            raise ValueError(f"quantile levels must lie in [0, 1], got {levels}")
+        if self.independent:
+            c = torch.tensor(levels, dtype=torch.float64)[:, None].expand(len(levels), self.dim)
+            return self.marginal_icdf(c.contiguous()).double()
+        if levels == QUANTILE_LEVELS:
+            return self._moments[2]
+        return _quantiles(self._moment_draws(), levels)
 
     @property
     def mean(self) -> torch.Tensor:
@@ -127,6 +148,11 @@ class ParameterDistribution:
         if not isinstance(dist, ParameterDistribution):
             raise DataFileError(f"{path} holds a {type(dist).__name__}, not a ParameterDistribution")
         return dist
+
+
+def _quantiles(draws: torch.Tensor, levels: tuple[float, ...]) -> torch.Tensor:
+    # numpy: torch.quantile refuses inputs above 2**24 values (20,000 draws of 839 parameters)
+    return torch.from_numpy(np.quantile(draws.numpy(), levels, axis=0))
 
 
 @contextlib.contextmanager

@@ -1,15 +1,14 @@
 """A short GIF of a policy on fixed parameters, drawn with MuJoCo's offscreen renderer.
 
 Rendering needs an MjData, so the episode is replayed here on one plain MuJoCo model with the
-parameters written in (the same ParamSpec.field_values the backends use), whatever backend trained the
-policy. Headless machines need MUJOCO_GL=egl or osmesa set before mujoco is imported; without a GL
+parameters written in (tasks/parameterized.py: the same ParamSpec.field_values the backends use),
+whatever backend trained the policy. Headless machines need MUJOCO_GL=egl or osmesa set before mujoco is imported; without a GL
 context `render_gif` returns None and the reason, and the run goes on. It does not even try GLFW
 without a display: a second failed GLFW start aborts the whole process.
 """
 
 from __future__ import annotations
 
-import copy
 import io
 import os
 import types
@@ -19,16 +18,7 @@ import numpy as np
 import torch
 
 from ..tasks.base import Task
-
-
-def model_with_params(task: Task, params: np.ndarray) -> mujoco.MjModel:
-    """A copy of the task's model with parameters [D] written into its fields."""
-    model = copy.deepcopy(task.model)
-    for name, values in task.spec.field_values(task.model, np.asarray(params, dtype=np.float64)[None]).items():
-        owner, field = (model.opt, name[4:]) if name.startswith("opt.") else (model, name)
-        getattr(owner, field)[...] = values[0].reshape(getattr(owner, field).shape)
-    return model
-
+from ..tasks.parameterized import model_with_params
 
 _failed: list[str] = []  # the first failure's reason: a GL context that failed once is not tried again
 

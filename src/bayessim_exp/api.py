@@ -208,6 +208,8 @@ class Run:
         """Whose distribution round `round_index` handed on, as its record in results.json says."""
         r = self.round_number(round_index)
         record = self.results["rounds"][r - 1]
+        if "handed_on" in record:  # the pipeline's record; runs recorded before it: the guard's or sysid's words
+            return HandedOn(r, record["handed_on"]["round"], record["handed_on"]["name"])
         guard = record.get("guard")
         said = guard.get("handed_on") if isinstance(guard, dict) else None
         if said == "the prior" or (record.get("sysid") or {}).get("failed"):

@@ -87,6 +87,9 @@ class Sysid(InferenceMethod):
     def posterior(self, ctx: RoundContext) -> ParameterDistribution:
         return fitted(ctx, self.inputs.prior)
 
+    def handed_on_round(self, ctx: RoundContext) -> int:
+        return 0 if ctx.output("fit")["failed"] else ctx.round
+
     def record(self, ctx: RoundContext) -> dict:
         out = ctx.output("fit")
         names = self.inputs.task.spec.names

@@ -44,7 +44,7 @@ def test_checking_every_groups_config_loads_neither_torchrl_nor_jax_nor_the_fact
             "print(listed > 30, after_listing, *(name in sys.modules for name in "
             "('torchrl', 'jax', 'bayessim_exp.rl.component', 'bayessim_exp.rl.actor_policy')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["True", "['bayessim_exp.errors',", "'bayessim_exp.registry']",
+    assert out.stdout.split() == ["True", "['bayessim_exp.errors',", "'bayessim_exp.registry',", "'bayessim_exp.run_name']",
                                   "False", "False", "False", "False"]
 
 

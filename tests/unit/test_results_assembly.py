@@ -31,7 +31,7 @@ def test_a_regenerated_section_replaces_its_block_only_and_a_missing_one_is_name
 
 
 def _fake_run(path: Path, task: str, method: str, seed: int, names: list[str], mean: float, std: float,
-              hpd_level: float | None = None) -> None:
+              hpd_level: float | None = None, truth: float = 1.0) -> None:
     path.mkdir(parents=True)
     cfg = {"rounds": 2, "real": {"per_round": 1}, "collect": {"horizon": 20, "trajectories": 300},
            "policy": {"name": "random"}, "model": {"name": "mdnn"}, "summarizer": {"name": "start"},
@@ -43,7 +43,7 @@ def _fake_run(path: Path, task: str, method: str, seed: int, names: list[str], m
     if hpd_level is not None:  # a known-truth run: where its truth lies in its final posterior
         last = {**last, "truth": {"hpd_level": hpd_level, "marginal_rank": {n: 0.5 for n in names}}}
     (path / "results.json").write_text(json.dumps({
-        "task": task, "method": method, "seed": seed, "param_names": names, "true_params": {n: 1.0 for n in names},
+        "task": task, "method": method, "seed": seed, "param_names": names, "true_params": {n: truth for n in names},
         "prior": {"low": {n: 0.5 for n in names}, "high": {n: 2.0 for n in names}}, "rounds": [last, last]}))
 
 
@@ -66,7 +66,7 @@ def test_the_methods_section_quotes_what_its_runs_measured(tmp_path):
         names = ["mass", "length"] if task == "Pendulum" else ["cart_mass", "pole_mass", "motor_gain"]
         for seed, level in enumerate(PLANTED[method]):
             _fake_run(tmp_path / "calibration" / f"{task}_{method}" / f"seed{seed}", task, method, seed, names,
-                      1.0 + offset[method], 0.05, hpd_level=level)
+                      1.0 + offset[method], 0.05, hpd_level=level, truth=1.0 + 0.01 * seed)  # a truth per seed
     _fake_run(tmp_path / "closed_loop", "Pendulum", "simopt", 0, ["mass", "length"], 1.6, 0.2)
     text = section.render(ctx, "STAMP")
     assert text.startswith("## BayesSim, SimOpt and MuJoCo's sysid") and "STAMP" in text and "$" not in text
@@ -89,10 +89,12 @@ def test_the_methods_section_refuses_a_study_with_a_run_missing(tmp_path):
         _fake_run(tmp_path / "sweep" / f"{point['method']}", "Pendulum", point["method"], 0, ["mass"], 1.0, 0.05)
     _fake_run(tmp_path / "closed_loop", "Pendulum", "simopt", 0, ["mass"], 1.6, 0.2)
     for task, method in section.pairs(quick=True):
-        _fake_run(tmp_path / "calibration" / f"{task}_{method}" / "seed0", task, method, 0, ["mass"], 1.0, 0.05, 0.3)
-    (tmp_path / "calibration" / "Pendulum_sysid" / "seed1").mkdir()
-    (tmp_path / "calibration" / "Pendulum_sysid" / "seed1" / "error.txt").write_text("killed")
-    with pytest.raises(SectionError, match="Pendulum sysid: 1 of 2 known-truth runs"):
+        for seed in (0, 1):  # a truth per seed
+            _fake_run(tmp_path / "calibration" / f"{task}_{method}" / f"seed{seed}", task, method, seed, ["mass"], 1.0,
+                      0.05, 0.3, truth=1.0 + 0.01 * seed)
+    (tmp_path / "calibration" / "Pendulum_sysid" / "seed2").mkdir()
+    (tmp_path / "calibration" / "Pendulum_sysid" / "seed2" / "error.txt").write_text("killed")
+    with pytest.raises(SectionError, match="Pendulum sysid: 2 of 3 known-truth runs"):
         section.render(ctx, "STAMP")
 
 

@@ -62,8 +62,8 @@ def run_stage(ctx: RoundContext, stage: Stage) -> bool:
 
 
 def info_once_per_round(logger: logging.Logger, message: str) -> None:
-    """logger.info(message) the first time the running round says it (a note from inside a loop: the default run
-    repeated one in 39 of its 77 console lines); every time outside a stage."""
+    """logger.info(message) the first time the running round says it (a note from inside a loop would otherwise
+    fill the console); every time outside a stage."""
     key = _ROUND.get()
     if key is not None:
         if (key, message) in _SAID:

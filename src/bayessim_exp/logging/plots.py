@@ -29,7 +29,7 @@ _CHAR_WIDTH = 0.55 / 72  # inches per character per point of font size (a genero
 def _margins(fig: plt.Figure, left: float, right: float, bottom: float, top: float, between_x: float = 0.0,
              between_y: float = 0.0) -> None:
     """Margins and gaps between panels in inches, laid out once: matplotlib's tight_layout measures every tick
-    label by drawing the figure, which doubled a figure's drawing time (docs/benchmarks.md)."""
+    label by drawing the figure an extra time (its cost: docs/benchmarks.md)."""
     width, height = fig.get_size_inches()
     grid = fig.axes[0].get_subplotspec().get_gridspec()
     rows, cols = grid.get_geometry()

@@ -93,7 +93,7 @@ class TensorBoardLogger:
 
         self.writer = SummaryWriter(log_dir=str(log_dir))
         self._drawing: ProcessPoolExecutor | _InProcess = _InProcess()
-        # on one CPU a second process draws nothing sooner, and starting it costs twice the drawing's CPU time
+        # on one CPU a second process draws nothing sooner, and starting it costs more than the drawing itself
         if drawing_process and usable_cpus() > 1:
             # spawn: a forked copy of a process that holds CUDA and JAX state is not safe
             with _interpreter_start_method():  # the process starts at the first submit

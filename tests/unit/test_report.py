@@ -191,15 +191,20 @@ def test_a_sweep_without_known_truths_has_no_calibration_section(sweep):
     assert not (sweep / "report" / "calibration.csv").exists()
 
 
+def truth_sweep(tmp_path, jobs: int, source: str):
+    """A sweep of `jobs` known-truth jobs whose truths came from `source` (real.truth), reported: (dir, report.md)."""
+    sweep = tmp_path / "sweep"
+    for seed in range(jobs):
+        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}"],
+                 result=truth_results(seed, [0.3, 0.4], [0.2, 0.7], source=source))
+    build_report(sweep, posteriors=False)
+    return sweep, (sweep / "report" / "report.md").read_text()
+
+
 def test_seeds_repeated_at_one_truth_get_no_calibration_section(tmp_path):
     """`--multirun seed=0,1` at the task's own truth: every job knows its truth, but it is the same one; the report
     says so instead of counting '2 truths' with a per-round table, SBC histograms and uniformity tests."""
-    sweep = tmp_path / "sweep"
-    for seed in range(2):
-        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}"],
-                 result=truth_results(seed, [0.3, 0.4], [0.2, 0.7], source="task"))
-    build_report(sweep, posteriors=False)
-    markdown = (sweep / "report" / "report.md").read_text()
+    sweep, markdown = truth_sweep(tmp_path, 2, "task")
     assert "Calibration" not in markdown and "2 truths" not in markdown
     assert "`all`: 2 job(s) at one truth (real.truth=task): no calibration section" in markdown
     assert not any((sweep / "report" / name).exists() for name in ("calibration.csv", "sbc.csv", "sbc_ranks_00.png"))
@@ -207,12 +212,7 @@ def test_seeds_repeated_at_one_truth_get_no_calibration_section(tmp_path):
 
 def test_nominal_truths_get_the_section_without_uniformity_tests(tmp_path):
     """Truths at the MJCF's values, a few moved, vary but are not prior draws: their ranks need not be uniform."""
-    sweep = tmp_path / "sweep"
-    for seed in range(12):
-        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}"],
-                 result=truth_results(seed, [0.3, 0.4], [0.2, 0.7], source="nominal"))
-    build_report(sweep, posteriors=False)
-    markdown = (sweep / "report" / "report.md").read_text()
+    sweep, markdown = truth_sweep(tmp_path, 12, "nominal")
     assert "## Calibration (known truths)" in markdown and "12 truths (nominal" in markdown
     assert "SBC uniformity tests: not computed, the truths were not drawn from the prior" in markdown
     assert (sweep / "report" / "calibration.csv").exists() and not (sweep / "report" / "sbc.csv").exists()

@@ -53,15 +53,13 @@ def export_run(run: Run, out_dir: str | Path, round_index: int | None = None, n:
     names, task = samples.names, run.task
     files = {"samples.csv": _write_csv(out / "samples.csv", names, samples.values.numpy()),
              "samples.npz": _write_npz(out / "samples.npz", run, samples)}
-    mean, std, quantiles = dist.mean.double(), dist.stddev.double(), dist.quantiles(QUANTILE_LEVELS)
-    low, high = _support(dist, task)
-    rows = np.column_stack([mean.numpy(), std.numpy(), quantiles.T.numpy(), low, high])
-    header = ["mean", "std", *map(quantile_key, QUANTILE_LEVELS), "low", "high"]
-    files["quantiles.csv"] = _write_csv(out / "quantiles.csv", ["parameter", *header],
-                                        [[name, *row] for name, row in zip(names, rows.tolist())])
+    marginals = _marginals(dist, task)
+    files["quantiles.csv"] = _write_csv(out / "quantiles.csv", ["parameter", *MARGINAL_COLUMNS],
+                                        [[name, *row] for name, row in zip(names, marginals.tolist())])
     files["dr.yaml"] = out / "dr.yaml"
-    files["dr.yaml"].write_text(dr_yaml(run, handed, dist, samples, dr_interval))
-    points = {"mean": mean.numpy(), "median": quantiles[QUANTILE_LEVELS.index(0.5)].numpy()}
+    files["dr.yaml"].write_text(dr_yaml(run, handed, dist, samples, dr_interval, marginals))
+    points = {"mean": marginals[:, MARGINAL_COLUMNS.index("mean")],
+              "median": marginals[:, MARGINAL_COLUMNS.index(quantile_key(0.5))]}
     points.update({f"draw{k}": samples.values[k].numpy() for k in draws_wanted})
     for what in mjcf:
         key = what.replace(":", "")
@@ -90,6 +88,16 @@ def _check(n: int, mjcf: tuple[str, ...], dr_interval: float) -> list[int]:
             raise ValueError(f"--mjcf {what}: there are {n} draws (rows 0 to {n - 1})")
         draws.append(int(k))
     return draws
+
+
+MARGINAL_COLUMNS = ["mean", "std", *map(quantile_key, QUANTILE_LEVELS), "low", "high"]
+
+
+def _marginals(dist: ParameterDistribution, task) -> np.ndarray:
+    """Per parameter (rows) the MARGINAL_COLUMNS: moments, quantiles and the support, computed once for every file."""
+    low, high = _support(dist, task)
+    return np.column_stack([dist.mean.double().numpy(), dist.stddev.double().numpy(),
+                            dist.quantiles(QUANTILE_LEVELS).T.numpy(), low, high])
 
 
 def _support(dist: ParameterDistribution, task) -> tuple[np.ndarray, np.ndarray]:
@@ -121,8 +129,8 @@ def _g(value: float) -> float | None:
 
 
 def dr_yaml(run: Run, handed: HandedOn, dist: ParameterDistribution, samples: ParameterSamples,
-            interval: float) -> str:
-    """dr.yaml's text (the module docstring says what it holds)."""
+            interval: float, marginals: np.ndarray) -> str:
+    """dr.yaml's text (the module docstring says what it holds); `marginals` as _marginals gives them."""
     task, names = run.task, samples.names
     declared = OmegaConf.to_container(run.config.task.parameters, resolve=True)
     if handed.is_prior:
@@ -139,11 +147,8 @@ def dr_yaml(run: Run, handed: HandedOn, dist: ParameterDistribution, samples: Pa
         entry["range"] = [_g(lows[j]), _g(highs[j])]
         parameters[name] = {k: entry[k] for k in ("range", "operation", "nominal", "targets") if k in entry}
         overrides.append(f"task.parameters.{name}.range=[{_g(lows[j])},{_g(highs[j])}]")
-    mean, std, quantiles = dist.mean.double(), dist.stddev.double(), dist.quantiles(QUANTILE_LEVELS)
-    low, high = _support(dist, task)
-    marginals = {name: {"mean": _g(mean[j]), "std": _g(std[j]),
-                        **{quantile_key(q): _g(quantiles[i, j]) for i, q in enumerate(QUANTILE_LEVELS)},
-                        "low": _g(low[j]), "high": _g(high[j])} for j, name in enumerate(names)}
+    by_name = {name: {column: _g(v) for column, v in zip(MARGINAL_COLUMNS, row)}
+               for name, row in zip(names, marginals.tolist())}
     corr = np.atleast_2d(np.corrcoef(samples.values.numpy(), rowvar=False))
     doc = {
         "task": task.name,
@@ -151,7 +156,7 @@ def dr_yaml(run: Run, handed: HandedOn, dist: ParameterDistribution, samples: Pa
                    "handed_on": handed.description, "handed_on_round": handed.source, "prior": handed.is_prior},
         "parameters": parameters,
         "overrides": overrides,
-        "marginals": marginals,
+        "marginals": by_name,
         "correlation": [[_g(v) for v in row] for row in corr.tolist()],
         "samples": {"file": "samples.csv", "draws": len(samples), "seed": samples.seed},
     }
@@ -171,7 +176,7 @@ def dr_yaml(run: Run, handed: HandedOn, dist: ParameterDistribution, samples: Pa
 
 def _print_summary(run: Run, handed: HandedOn, files: dict[str, Path]) -> None:
     print(f"{run.results['task']}, round {handed.round} of {run.path}: handed on {handed.description}")
-    columns = ["mean", "std", *map(quantile_key, QUANTILE_LEVELS)]
+    columns = MARGINAL_COLUMNS[:-2]  # the support is in quantiles.csv
     print(f"{'parameter':<24}" + "".join(f"{c:>12}" for c in columns))
     with files["quantiles.csv"].open() as f:
         for row in csv.DictReader(f):

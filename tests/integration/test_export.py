@@ -134,7 +134,7 @@ def test_an_earlier_round_exports_the_prior_it_handed_on(run_dir, tmp_path):
     assert "handed on (the prior) written in" in (tmp_path / "Pendulum_mean.xml").read_text()
 
 
-def test_sbi_takes_the_torch_view_as_a_prior_and_pairplots_the_samples(run_dir):
+def test_sbi_takes_the_torch_view_as_a_prior_and_pairplots_the_samples(run_dir, exported):
     pytest.importorskip("sbi", reason="sbi is an optional extra: pip install 'bayessim_exp[sbi]'")
     import matplotlib
 
@@ -151,7 +151,7 @@ def test_sbi_takes_the_torch_view_as_a_prior_and_pairplots_the_samples(run_dir):
         assert prior is view and dim == 2  # taken as it is: no wrapper, no warning
         # sbi 0.27's pairplot itself warns under NumPy 2 whatever it is given (a plain ndarray too)
         warnings.filterwarnings("ignore", "__array__ implementation doesn't accept a copy keyword", DeprecationWarning)
-        for given in (samples.values, np.load(run_dir / "export" / "round_002" / "samples.npz")["samples"]):
+        for given in (samples.values, np.load(exported / "samples.npz")["samples"]):
             pairplot(given, labels=samples.names, limits=[[0.5, 2.0], [0.25, 1.0]])
 
 

@@ -139,12 +139,12 @@ def test_the_model_error_is_least_squares_spread_of_each_features_unexplained_pa
 def test_a_parameter_every_replay_shares_gets_no_slope_and_its_value_as_implied():
     """Seed 19 of a Pendulum calibration study stopped here: every posterior draw of one parameter on the box's
     edge made the linear fit's normal matrix singular. z = 2 theta_0 + noise; theta_1 constant at 2.0."""
-    from bayessim_exp.diagnostics.replayed_check import _implied_parameters
+    from bayessim_exp.diagnostics.replayed_check import implied_parameters
 
     g = torch.Generator().manual_seed(0)
     theta = torch.stack([torch.randn(100, dtype=torch.float64, generator=g), torch.full((100,), 2.0, dtype=torch.float64)], 1)
     z = 2 * theta[:, :1] + 0.01 * torch.randn(100, 1, dtype=torch.float64, generator=g)
-    implied, residual, _, _, _ = _implied_parameters(z, theta, torch.tensor([[1.0]], dtype=torch.float64))
+    implied, residual, _, _, _ = implied_parameters(z, theta, torch.tensor([[1.0]], dtype=torch.float64))
     assert torch.isfinite(implied).all() and torch.isfinite(residual).all()
     assert implied[0, 0] == pytest.approx(0.5 + float(theta[:, 0].mean()) - float(z.mean()) / 2, abs=0.01)
     assert implied[0, 1] == 2.0

@@ -133,10 +133,10 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
             continue
         scale = reference.std(0)
         keep = ~constant_columns(reference)
-        z_sims, z_real = _standard(sims, scale, keep), _standard(x_real[i : i + 1], scale, keep)
+        z_sims, z_real = standardised(sims, scale, keep), standardised(x_real[i : i + 1], scale, keep)
         d_post.append(float(torch.cdist(z_sims, z_real)[:, 0].median()))
-        d_prior.append(float(torch.cdist(_standard(reference, scale, keep), z_real)[:, 0].median()))
-        implied, residual, gram, slopes, per_feature = _implied_parameters(z_sims, theta, torch.cat([z_sims, z_real]))
+        d_prior.append(float(torch.cdist(standardised(reference, scale, keep), z_real)[:, 0].median()))
+        implied, residual, gram, slopes, per_feature = implied_parameters(z_sims, theta, torch.cat([z_sims, z_real]))
         spread = torch.linalg.pinv(torch.atleast_2d(torch.cov(implied[:-1].T)))
         centred = implied - implied[:-1].mean(0)
         mahalanobis = ((centred @ spread) * centred).sum(1)
@@ -162,7 +162,7 @@ def _rank(replays: torch.Tensor, real: torch.Tensor) -> float:
     return float(1 + (replays >= real).sum()) / (len(replays) + 1)
 
 
-def _implied_parameters(z: torch.Tensor, theta: torch.Tensor,
+def implied_parameters(z: torch.Tensor, theta: torch.Tensor,
                         queries: torch.Tensor) -> tuple[torch.Tensor, ...]:
     """The least-squares linear map z ~ a + B (theta - mean) over the replays (z [m, F], theta [m, D]);
     for each query summary [k, F] its implied parameters [k, D], its RMS residual from the map [k]; B^T B; the
@@ -183,7 +183,7 @@ def _ridged(normal: torch.Tensor) -> torch.Tensor:
     return normal + 1e-9 * normal.diagonal().mean().clamp_min(1e-300) * torch.eye(len(normal), dtype=normal.dtype)
 
 
-def _standard(x: torch.Tensor, scale: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:
+def standardised(x: torch.Tensor, scale: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:
     """Summaries [m, F] -> the varying features over their spread, divided by sqrt(count) so that
     Euclidean distances between rows are RMS differences."""
     return x[:, keep] / scale[keep] / math.sqrt(max(int(keep.sum()), 1))

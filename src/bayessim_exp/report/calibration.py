@@ -159,8 +159,10 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
               f"the final round handed on another distribution (fallback) in {c.handed_on_other}, the prior in "
               f"{c.handed_on_prior}. "
               f"Mismatch flagged: final round {c.flagged_final} of {c.jobs}, any round {c.flagged_any}. "
-              "Real data outside the training simulations (a guard failure): "
-              + (f"{share_text(*c.outside_rounds)} of the rounds checked." if c.outside_rounds[1] else "not checked.")]
+              "Real data outside the training simulations: "
+              + (f"{share_text(*c.outside_rounds)} of the rounds checked (a guard failure where no replay widening "
+                 "stands in for the check, as on Pendulum and Cartpole: docs/statistics.md, 'Many parameters')." if c.outside_rounds[1]
+                 else "not checked.")]
     if figure is not None:
         lines += ["", f"![SBC ranks of `{config}`]({figure.name})"]
     lines += [""] + uniformity_markdown(c)

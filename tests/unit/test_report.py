@@ -174,7 +174,7 @@ def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_
     assert "| 1 | 0/100 = 0.00 [0.00, 0.04] | 0/100 = 0.00 [0.00, 0.04] |" in markdown
     assert "90% region 89/100 = 0.89 [0.81, 0.94]" in markdown
     assert "**1 final posterior(s) put zero density at the truth**" in markdown
-    assert "Real data outside the training simulations: 2/200 = 0.01 [0.00, 0.04] of the rounds checked (a guard failure" in markdown
+    assert "Real data outside the training simulations: 2/200 = 0.01 [0.00, 0.04] of the rounds checked (the guard fails such a round unless" in markdown
     assert (sweep / "report" / "sbc_ranks_00.png").stat().st_size > 1000
     # a's ranks are evenly spread (uniform), b's all 0.5 (a posterior centred on every truth, too wide)
     with (sweep / "report" / "sbc.csv").open() as f:

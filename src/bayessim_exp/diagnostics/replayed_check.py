@@ -163,7 +163,7 @@ def _rank(replays: torch.Tensor, real: torch.Tensor) -> float:
 
 
 def implied_parameters(z: torch.Tensor, theta: torch.Tensor,
-                        queries: torch.Tensor) -> tuple[torch.Tensor, ...]:
+                       queries: torch.Tensor) -> tuple[torch.Tensor, ...]:
     """The least-squares linear map z ~ a + B (theta - mean) over the replays (z [m, F], theta [m, D]);
     for each query summary [k, F] its implied parameters [k, D], its RMS residual from the map [k]; B^T B; the
     slopes B [F, D]; and each query's residual per feature [k, F]. Both normal matrices are regularised by a relative 1e-9: a parameter the replays do not vary

@@ -160,9 +160,9 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
               f"{c.handed_on_prior}. "
               f"Mismatch flagged: final round {c.flagged_final} of {c.jobs}, any round {c.flagged_any}. "
               "Real data outside the training simulations: "
-              + (f"{share_text(*c.outside_rounds)} of the rounds checked (a guard failure on tasks without the replay "
-                 "widening; with it, as on Pendulum and Cartpole, recorded only: docs/statistics.md, 'Many parameters')." if c.outside_rounds[1]
-                 else "not checked.")]
+              + (f"{share_text(*c.outside_rounds)} of the rounds checked (the guard fails such a round unless the "
+                 "replay widening stands in for the check: docs/statistics.md, 'Many parameters')."
+                 if c.outside_rounds[1] else "not checked.")]
     if figure is not None:
         lines += ["", f"![SBC ranks of `{config}`]({figure.name})"]
     lines += [""] + uniformity_markdown(c)

@@ -1,12 +1,13 @@
 """Where one foreign pendulum trajectory's summaries put the parameters, all features and time blocks apart.
 
     PYTHONPATH=src python benchmarks/implied_parameters.py                     # rk4, euler, scipy and ours, 4 settings
-    PYTHONPATH=src python benchmarks/implied_parameters.py --sources rk4 ours --settings 2
+    PYTHONPATH=src python benchmarks/implied_parameters.py --sources rk4 ours --overrides summarizer=waypoints
 
 For each source and hidden setting of benchmarks/foreign_dynamics.py, one trajectory (n = 1, the same data seed)
 is replayed in our simulator at `--replays` parameter draws around the truth (standard deviation `--spread` of the
-prior's range per parameter) and summarized by the default summarizer. The replayed check's linear map
-(diagnostics/replayed_check.implied_parameters) gives the parameters the real summary implies:
+prior's range per parameter) and summarized by the default summarizer (or the one `--overrides` chooses). The
+replayed check's linear map (diagnostics/replayed_check.implied_parameters) gives the parameters the real summary
+implies:
 - from every feature: what the replay widening and a posterior centred by the summaries see; its offset from the
   truth is the part of the model error that looks like a parameter shift, which no residual can show;
 - from each of `--blocks` consecutive blocks of features alone (the start summarizer's features run step by step,
@@ -62,7 +63,7 @@ def reading(source: str, mass: float, length: float, seed: int, args, work: Path
     from bayessim_exp.real import load_trajectories
     from bayessim_exp.sim.pool import SimulatorPool
 
-    cfg = api.compose(["sim=native"])
+    cfg = api.compose(["sim=native", *args.overrides])
     task = registry.build("task", cfg.task)
     prior = registry.build("prior", cfg.prior, spec=task.spec)
     sims = SimulatorPool(registry.build("sim", cfg.sim), task, 4096)
@@ -111,6 +112,7 @@ def main() -> None:
     ap.add_argument("--replays", type=int, default=200)
     ap.add_argument("--spread", type=float, default=0.002, help="replay draws' std, as a share of the prior's range")
     ap.add_argument("--blocks", type=int, default=5, help="consecutive feature blocks (stretches of time)")
+    ap.add_argument("--overrides", nargs="*", default=[], help="config overrides, e.g. summarizer=waypoints")
     args = ap.parse_args()
     torch.set_num_threads(1)
     rows = []

@@ -22,6 +22,7 @@ foreign-dynamics benchmark) is printed beside them.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import tempfile
 from pathlib import Path
@@ -38,7 +39,7 @@ def block_readings(z: torch.Tensor, theta: torch.Tensor, z_real: torch.Tensor, b
     """z [m, F] replays' standardised summaries at theta [m, D]; z_real [1, F]. The implied parameters of the real
     summary from all features, the RMS distance of the block-alone readings from it (real and the replays' median)
     and the jackknife p-value of the real summary's leave-one-block-out variance among the replays'."""
-    from bayessim_exp.diagnostics.replayed_check import implied_parameters
+    from bayessim_exp.diagnostics.replayed_check import implied_parameters, rank_p_value
 
     queries = torch.cat([z, z_real])
     every = implied_parameters(z, theta, queries)[0]
@@ -49,40 +50,54 @@ def block_readings(z: torch.Tensor, theta: torch.Tensor, z_real: torch.Tensor, b
     spread = (alone - every).pow(2).mean(0).sqrt()  # [m + 1, D]
     jackknife = (left_out - left_out.mean(0)).pow(2).sum((0, 2))  # [m + 1]
     return {"implied": every[-1], "block_spread": spread[-1], "replay_block_spread": spread[:-1].median(0).values,
-            "jackknife_p": float(1 + (jackknife[:-1] >= jackknife[-1]).sum()) / len(jackknife)}
+            "jackknife_p": rank_p_value(jackknife[:-1], jackknife[-1])}
 
 
-def reading(source: str, mass: float, length: float, seed: int, args, work: Path) -> dict:
+@dataclasses.dataclass
+class Setup:
+    """What every case reads, built once: the task, its prior, the simulator and the summarizer."""
+
+    task: object
+    prior: object
+    sims: object
+    summarize: object
+
+    @classmethod
+    def compose(cls, overrides: list[str]) -> Setup:
+        from bayessim_exp import api, registry
+        from bayessim_exp.sim.pool import SimulatorPool
+
+        cfg = api.compose(["sim=native", *overrides])
+        task = registry.build("task", cfg.task)
+        return cls(task, registry.build("prior", cfg.prior, spec=task.spec),
+                   SimulatorPool(registry.build("sim", cfg.sim), task, 4096), registry.build("summarizer", cfg.summarizer))
+
+
+def reading(setup: Setup, source: str, mass: float, length: float, seed: int, args, work: Path) -> dict:
     import independent_pendulum
 
     import foreign_dynamics
-    from bayessim_exp import api, registry
     from bayessim_exp.diagnostics.replay import replay
     from bayessim_exp.diagnostics.replayed_check import standardised
     from bayessim_exp.models.base import constant_columns
     from bayessim_exp.real import load_trajectories
-    from bayessim_exp.sim.pool import SimulatorPool
 
-    cfg = api.compose(["sim=native", *args.overrides])
-    task = registry.build("task", cfg.task)
-    prior = registry.build("prior", cfg.prior, spec=task.spec)
-    sims = SimulatorPool(registry.build("sim", cfg.sim), task, 4096)
-    summarize = registry.build("summarizer", cfg.summarizer)
     path = work / f"{source}_{mass}_{length}.npz"
     foreign_dynamics.write_case(source, mass, length, 1, seed, "random", path)
     with np.load(path) as data:
-        real = load_trajectories(dict(data), task, foreign_dynamics.HORIZON, str(path))
+        real = load_trajectories(dict(data), setup.task, foreign_dynamics.HORIZON, str(path))
     g = torch.Generator().manual_seed(0)
     truth = torch.tensor([mass, length], dtype=torch.float64)
-    ranges = (prior.high - prior.low).double()
+    ranges = (setup.prior.high - setup.prior.low).double()
     theta = truth + args.spread * ranges * torch.randn(args.replays, 2, generator=g, dtype=torch.float64)
     first = torch.zeros(args.replays, dtype=torch.long)
-    x = summarize(replay(sims, theta, real, first)).double()
-    x_prior = summarize(replay(sims, prior.sample((args.replays,), generator=g).double(), real, first)).double()
+    x = setup.summarize(replay(setup.sims, theta, real, first)).double()
+    prior_draws = setup.prior.sample((args.replays,), generator=g).double()
+    x_prior = setup.summarize(replay(setup.sims, prior_draws, real, first)).double()
     scale, keep = x_prior.std(0), ~constant_columns(x_prior)
-    found = block_readings(standardised(x, scale, keep), theta, standardised(summarize(real).double(), scale, keep),
-                           args.blocks)
-    fit = independent_pendulum.best_fit(sims, real, foreign_dynamics.FIT_STEPS)
+    found = block_readings(standardised(x, scale, keep), theta,
+                           standardised(setup.summarize(real).double(), scale, keep), args.blocks)
+    fit = independent_pendulum.best_fit(setup.sims, real, foreign_dynamics.FIT_STEPS)
     return {"source": source, "truth": [mass, length], "best_fit": fit.tolist(),
             **{k: v.tolist() if torch.is_tensor(v) else v for k, v in found.items()}}
 
@@ -115,11 +130,11 @@ def main() -> None:
     ap.add_argument("--overrides", nargs="*", default=[], help="config overrides, e.g. summarizer=waypoints")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    rows = []
+    setup, rows = Setup.compose(args.overrides), []
     with tempfile.TemporaryDirectory() as work:
         for source in args.sources:
             for k, (mass, length) in enumerate(foreign_dynamics.SETTINGS[: args.settings]):
-                rows.append(reading(source, mass, length, 100 + k, args, Path(work)))  # foreign_dynamics' data seeds
+                rows.append(reading(setup, source, mass, length, 100 + k, args, Path(work)))  # foreign_dynamics' data seeds
                 print(table(rows[-1:])[-1], flush=True)
     print("\n".join(["", *table(rows)]))
 

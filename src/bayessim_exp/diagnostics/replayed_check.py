@@ -142,21 +142,21 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
         mahalanobis = ((centred @ spread) * centred).sum(1)
         residuals.append(float(residual[-1]))
         baselines.append(float(residual[:-1].median()))
-        residual_p.append(_rank(residual[:-1], residual[-1]))
+        residual_p.append(rank_p_value(residual[:-1], residual[-1]))
         if residual_p[-1] <= alpha:
             # per feature, the real residual's square beyond the replays' median square: the parameter covariance
             # of least squares with that error in each feature (the sandwich G^-1 B^T diag(v) B G^-1)
             excess = (per_feature[-1] ** 2 - per_feature[:-1].pow(2).median(0).values).clamp_min(0.0)
             inverse = torch.linalg.inv(gram)
             error_covariance += inverse @ (slopes.T * excess) @ slopes @ inverse / n
-        p_values.append(_rank(mahalanobis[:-1], mahalanobis[-1]))
+        p_values.append(rank_p_value(mahalanobis[:-1], mahalanobis[-1]))
     states_post = post.states.double().cpu().reshape(n, num, *post.states.shape[1:])
     states_prior = pri.states.double().cpu().reshape(n, num, *pri.states.shape[1:])
     return ReplayCheck(d_post, d_prior, residuals, baselines, residual_p, p_values, alpha, max_distance_ratio, real,
                        states_post, states_prior, posterior_covariance, error_covariance)
 
 
-def _rank(replays: torch.Tensor, real: torch.Tensor) -> float:
+def rank_p_value(replays: torch.Tensor, real: torch.Tensor) -> float:
     """(1 + #{replays at least as large as the real value}) / (count + 1): a p-value, uniform in steps of
     1 / (count + 1) when the real value is exchangeable with the replays'."""
     return float(1 + (replays >= real).sum()) / (len(replays) + 1)

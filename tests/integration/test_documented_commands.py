@@ -22,22 +22,12 @@ SCRIPTS = sorted(p for p in [*(REPO / "benchmarks").glob("*.py"), *(REPO / "scri
                  if 'if __name__ == "__main__":' in p.read_text())
 ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
 
-# In a subprocess per script, as `python <script>` runs it: `--help` must exit 0; then main() runs once per
-# documented argument list with ArgumentParser.parse_args stopping it right after a successful parse.
+# In one subprocess for every script (a fresh interpreter per script cost 3-4 s of imports each), each script run
+# as `python <script>` runs it: `--help` must exit 0; then main() runs once per documented argument list with
+# ArgumentParser.parse_args stopping it right after a successful parse. Prints {script: [usage printed, error]}.
 DRIVER = r"""
-import argparse, json, runpy, sys
+import argparse, contextlib, io, json, runpy, sys
 from pathlib import Path
-
-script, commands = sys.argv[1], json.loads(sys.argv[2])
-sys.path.insert(0, str(Path(script).parent))
-sys.argv = [script, "--help"]
-try:
-    runpy.run_path(script, run_name="__main__")
-except SystemExit as exc:
-    if exc.code not in (0, None):
-        sys.exit(f"--help exited {exc.code}")
-else:
-    sys.exit("--help did not exit: the script has no argparse --help")
 
 
 class Parsed(Exception):
@@ -52,14 +42,37 @@ def parse_only(self, args=None, namespace=None):
     raise Parsed
 
 
-argparse.ArgumentParser.parse_args = parse_only
-for args in commands:
-    sys.argv = [script, *args]
+def check(script, commands):
+    sys.argv = [script, "--help"]
+    argparse.ArgumentParser.parse_args = parse
     try:
         runpy.run_path(script, run_name="__main__")
-    except Parsed:
-        continue
-    sys.exit(f"{' '.join(args)}: main() ended without parsing its arguments")
+    except SystemExit as exc:
+        if exc.code not in (0, None):
+            return f"--help exited {exc.code}"
+    else:
+        return "--help did not exit: the script has no argparse --help"
+    argparse.ArgumentParser.parse_args = parse_only
+    for args in commands:
+        sys.argv = [script, *args]
+        try:
+            runpy.run_path(script, run_name="__main__")
+        except Parsed:
+            continue
+        except SystemExit as exc:
+            return f"{' '.join(args)}: exited {exc.code}"
+        return f"{' '.join(args)}: main() ended without parsing its arguments"
+    return None
+
+
+results, path = {}, list(sys.path)
+for script, commands in json.loads(sys.stdin.read()).items():
+    sys.path[:] = [str(Path(script).parent), *path]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        error = check(script, commands)
+    results[script] = [out.getvalue(), error and error + "\n" + err.getvalue()[-3000:]]
+print(json.dumps(results))
 """
 
 
@@ -100,14 +113,23 @@ def test_a_synopsis_is_read_as_its_arguments():
     assert rl[0] == [] and rl[1][:3] == ["--tasks", "Cartpole", "Ant"] and rl[1][-1] == "rl.train.epochs=5"
 
 
-@pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.stem}")
-def test_help_and_the_documented_commands_parse(path):
-    commands = documented_commands(path)
-    assert commands, f"{path.name}'s docstring documents no `python {path.parent.name}/{path.name} ...` command"
-    proc = subprocess.run([sys.executable, "-c", DRIVER, str(path), json.dumps(commands)], cwd=REPO, env=ENV,
-                          capture_output=True, text=True, timeout=120)
+@pytest.fixture(scope="module")
+def parsed() -> dict[str, list]:
+    """Every script's [what it printed, its error or None], from one driver process."""
+    commands = {str(path): documented_commands(path) for path in SCRIPTS}
+    proc = subprocess.run([sys.executable, "-c", DRIVER], input=json.dumps(commands), cwd=REPO, env=ENV,
+                          capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert re.search(r"^usage: ", proc.stdout, re.M), proc.stdout[:500]
+    return json.loads(proc.stdout.splitlines()[-1])
+
+
+@pytest.mark.xdist_group("documented_commands")
+@pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: f"{p.parent.name}/{p.stem}")
+def test_help_and_the_documented_commands_parse(path, parsed):
+    assert documented_commands(path), f"{path.name}'s docstring documents no `python {path.parent.name}/{path.name} ...` command"
+    printed, error = parsed[str(path)]
+    assert error is None, error
+    assert re.search(r"^usage: ", printed, re.M), printed[:500]
 
 
 def rl_benchmark():

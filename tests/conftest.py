@@ -3,10 +3,13 @@ writes each test's seconds (make durations: tests/durations.json), and under xdi
 by that file, so that the two workers of make test finish together instead of one running a long test alone
 at the end. Tests marked xdist_group (those sharing a module fixture) run on one worker as one unit."""
 
+import atexit
 import copy
 import functools
 import json
 import os
+import shutil
+import tempfile
 from collections import defaultdict
 from pathlib import Path
 
@@ -17,6 +20,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 # XLA's backend optimisations the tiny models' tests compiled in half the time, but FrankaCabinet's took 883 s
 # against 122 s: not used.)
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
+# JAX's persistent compilation cache, one per process of the suite (its subprocesses inherit it): tests build many
+# simulators of the same tiny models, and a new simulator's programs are compiled again where JAX's in-memory cache
+# misses (docs/benchmarks.md: the tiny-model MJX tests' CPU seconds 444 -> 324). Every program, the small ones too.
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="bayessim-tests-jax-")
+    atexit.register(shutil.rmtree, os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
 
 
 def _pin_worker() -> None:

@@ -20,7 +20,8 @@ class Zeros:
 class CompilingNative(NativeSimulator):
     """Native MuJoCo that claims, as MJX does, that every batch size is a compilation."""
 
-    compiles_per_size = True
+    def pads(self, num_rows: int) -> bool:
+        return True
 
 
 def _rollout(make, task, params, state):
@@ -38,6 +39,27 @@ def test_the_last_chunk_runs_padded_in_the_chunk_sized_simulator(compose):
     assert padded.num == 10
     for field in ("states", "actions", "rewards", "valid", "diverged"):
         torch.testing.assert_close(getattr(padded, field), getattr(exact, field))
+
+
+def test_a_batch_the_simulator_does_not_pad_runs_in_one_of_its_own_size(compose):
+    """As sim=mjx's batches below native_below: a model check's few rows after a collect's chunks run alone (on
+    native MuJoCo there), never padded into a chunk-sized rollout."""
+    from types import SimpleNamespace
+
+    from bayessim_exp.sim.mjx import MjxSimulator
+
+    class PadsFromThree(NativeSimulator):
+        def pads(self, num_rows: int) -> bool:
+            return num_rows >= 3
+
+    task = registry.build("task", compose(["task=Pendulum"]).task)
+    pool = SimulatorPool(lambda t, n: PadsFromThree(t, n, CONFIG), task, chunk=4)
+    params = np.tile(task.spec.nominal, (10, 1))
+    assert pool.rollout(params, Zeros(), horizon=5, seed=3).num == 10 and sorted(pool._sims) == [2, 4]
+    assert pool.rollout(params[:7], Zeros(), horizon=5, seed=3).num == 7 and sorted(pool._sims) == [2, 4]
+    # MJX's rule: pad from native_below on (below it the sim group's factory builds native MuJoCo)
+    mjx = SimpleNamespace(cfg=SimpleNamespace(native_below=1024))
+    assert not MjxSimulator.pads(mjx, 200) and MjxSimulator.pads(mjx, 1024)
 
 
 def test_a_replay_plan_drives_each_simulation_like_its_recorded_trajectory_across_padded_chunks(compose):

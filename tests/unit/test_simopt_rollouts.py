@@ -54,7 +54,8 @@ def test_a_short_last_chunk_runs_padded_in_the_chunk_sized_simulator(compose):
     from bayessim_exp.sim.native import NativeConfig, NativeSimulator
 
     class CompilingNative(NativeSimulator):
-        compiles_per_size = True
+        def pads(self, num_rows: int) -> bool:
+            return True
 
     task, _, real = setup(compose, "Pendulum")
     config = NativeConfig(nthread=1, max_abs_qvel=1.0e4)

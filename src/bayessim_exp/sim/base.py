@@ -51,8 +51,6 @@ def broke_down(qpos: Any, qvel: Any, max_abs_qvel: float, xp: Any = np) -> Any:
 class Simulator(abc.ABC):
     """N slots of `task`; each slot takes new parameters and an initial state at its own reset."""
 
-    compiles_per_size = False  # each batch size costs a compilation (MJX): the pool pads batches to one size
-
     def __init__(self, task: Task, num_envs: int):
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -60,6 +58,11 @@ class Simulator(abc.ABC):
         self.task, self.num_envs = task, num_envs
         self.elapsed = torch.zeros(num_envs, dtype=torch.long)
         self.diverged = torch.zeros(num_envs, dtype=torch.bool)
+
+    def pads(self, num_rows: int) -> bool:
+        """Whether a batch of num_rows (< num_envs) runs in this simulator, padded, rather than in one of its own
+        size: where each size would be a compilation (MJX)."""
+        return False
 
     # what a backend implements ------------------------------------------------------
     @classmethod

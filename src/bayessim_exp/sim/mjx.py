@@ -81,8 +81,6 @@ class MjxSimulator(Simulator):
     """`randomize=False` runs every slot on the nominal model and ignores the parameters: what per-slot
     parameters cost is measured against it (benchmarks/sim_throughput.py)."""
 
-    compiles_per_size = True
-
     def __init__(self, task: Task, num_envs: int, cfg: MjxConfig, randomize: bool = True):
         super().__init__(task, num_envs)
         self.cfg, self.randomize = cfg, randomize
@@ -139,6 +137,12 @@ class MjxSimulator(Simulator):
         # one compilation per horizon (the actions' shape)
         self._rollout_fn = jit(self._scan, lambda leaves, data, obs, broken, act: (data, obs, broken, 0, 0, 0, 0, 0))
         self._closed_loops: dict[Callable, Callable] = {}  # jitted per policy function
+
+
+    def pads(self, num_rows: int) -> bool:
+        """A batch below native_below runs on native MuJoCo (mjx_backend) even after a chunk-sized simulator exists:
+        padded, a model check's few hundred simulations would cost a whole chunk's rollout."""
+        return num_rows >= self.cfg.native_below
 
     def _jit_maker(self, names: list[str], constants: list[str], on_host: list[str]) -> Callable:
         """jax.jit, or where `cache_dir` is set and MJX runs its JAX implementation, a jit whose traced

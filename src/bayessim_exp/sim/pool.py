@@ -3,7 +3,8 @@
 A simulator is built once per size and reused by every stage and round. A collect of 10,000
 simulations in chunks of 4,096 builds two, 4,096 and 1,808, where sizes cost nothing (native); where
 each size is a compilation (MJX), the last chunk runs in the 4,096-slot simulator, filled up with
-copies of its first row whose results are dropped.
+copies of its first row whose results are dropped (`Simulator.pads`; a batch below sim.native_below
+runs on native MuJoCo in a simulator of its own size).
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ class SimulatorPool:
             part_state = None if state is None else {f: v[rows] for f, v in state.items()}
             part_policy = policy.select(rows) if hasattr(policy, "select") else policy
             n, full = len(block), self._sims.get(self.chunk)
-            if n < self.chunk and full is not None and full.compiles_per_size:
+            if n < self.chunk and full is not None and full.pads(n):
                 pad = self.chunk - n
                 part_state = None if part_state is None else {f: _fill(np.asarray(v), pad) for f, v in part_state.items()}
                 if hasattr(part_policy, "select"):

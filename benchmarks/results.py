@@ -67,8 +67,11 @@ SECTIONS = [
     MethodsSection(),
     # its own process pool of 12 runs (one thread each; `--device cuda` fits on a GPU where there is one)
     ScriptSection("foreign_dynamics", "benchmarks/foreign_dynamics.py", args=("--section", "--jobs", "12"),
-                  quick_args=("--section", "--quick", "--jobs", "2", "--sources", "ours", "--settings", "1",
-                              "--sine", "0", "--overrides", "debug=smoke"), cost=600.0),
+                  # one worker: results.py's jobs already fill the cores; one round of smoke's simulations, not
+                  # --quick's 2 of 2,000 (the section reads the last round)
+                  quick_args=("--section", "--quick", "--jobs", "1", "--sources", "ours", "--settings", "1",
+                              "--sine", "0", "--overrides", "debug=smoke", "rounds=1", "collect.trajectories=300"),
+                  cost=600.0),
     RlSection(),
     # per task: surrogate real settings, seeds, scripts/rl_on_robots.py's budget and backends
     RobotsSection("rl_on_robots", {"Cartpole": ((0, 1, 2), (0, 1, 2, 3, 4),

@@ -112,7 +112,8 @@ class MethodsSection:
 
     @staticmethod
     def _budget(ctx: Context) -> list[str]:
-        return ["debug=smoke"] if ctx.quick else []
+        # one round when quick: the section reads each run's last round only, and a round is a third of a job
+        return ["debug=smoke", "rounds=1"] if ctx.quick else []
 
     def _closed_loop_job(self, ctx: Context) -> Job:
         argv = [sys.executable, "-m", "bayessim_exp", "task=Pendulum", "method=simopt", "method.rollout=closed_loop",
@@ -337,10 +338,13 @@ class RobotsSection:
     posteriors, on the uniform prior and on the nominal model, over surrogate real settings x seeds. Jobs: one per
     (setting, seed) for BayesSim and the posteriors' policies, one per seed for the baselines' (trained once,
     scored on every setting). The per-task JSON and the figure go to ctx.figures. A section with `needs_gpu` trains
-    PPO on a GPU in the full mode; its quick mode runs the same code on the CPU at smoke budgets."""
+    PPO on a GPU in the full mode; its quick mode runs the same code on the CPU at smoke budgets, each task's study
+    as one job (Cartpole's quick jobs already split a study as the full mode does)."""
 
-    quick = ["--rounds", "2", "--episodes", "2", "--overrides", *CPU_JOB, "debug=smoke", "--rl-overrides", *CPU_JOB,
-             "debug=smoke"]
+    # surrogate real episodes of 100 steps: scoring the policies on 1,000-step episodes (Ant, Humanoid) was 40 %
+    # of a quick job; TensorBoard's pair plot of 2 parameters, not of 6 (36 panels drawn each round)
+    quick = ["--rounds", "2", "--episodes", "2", "--overrides", *CPU_JOB, "debug=smoke", "logging.max_plot_params=2",
+             "--rl-overrides", *CPU_JOB, "debug=smoke", "task.episode_length=100"]
 
     def __init__(self, name: str, tasks: dict[str, tuple[tuple[int, ...], tuple[int, ...], list[str]]],
                  needs_gpu: bool = False, priority: float = 0.0):
@@ -352,11 +356,14 @@ class RobotsSection:
             yield task, (settings[:1], seeds[:1]) if ctx.quick else (settings, seeds)
 
     def _parts(self, ctx: Context):
-        """Each job's task, name, settings, seeds and policies: per seed its baselines (first: two trainings
-        without BayesSim before them), then its pairs."""
+        """Each job's task, name, settings, seeds and policies (None: all): per seed its baselines (first: two
+        trainings without BayesSim before them), then its pairs; a GPU section's quick study in one job."""
         from rl_on_robots import BASELINES, POSTERIORS
 
         for task, (settings, seeds) in self._studies(ctx):
+            if ctx.quick and self.needs_gpu:  # a job fewer per task: each is a process importing torch
+                yield task, task, settings, seeds, None
+                continue
             for seed in seeds:
                 yield task, f"{task}_baselines_seed{seed}", settings, [seed], BASELINES
                 for setting in settings:

@@ -1,6 +1,6 @@
 """`python benchmarks/results.py --quick` end to end: every section's jobs at tiny budgets, rendered from what the
-jobs really wrote, into a page outside docs/ (docs/results.md untouched). About 220 CPU seconds, its 16 jobs
-2 at a time on one core of the 2-core machine in 450 s (2026-11-27, the machine loaded)."""
+jobs really wrote, into a page outside docs/ (docs/results.md untouched). Its cost: docs/benchmarks.md, "Model checks
+off the padded device rollout; the suite's cheaper parts"."""
 
 import subprocess
 import sys

@@ -59,7 +59,7 @@ class Pipeline:
         if self._tb is None:
             from .logging.tensorboard import TensorBoardLogger
 
-            self._tb = TensorBoardLogger(self.run_dir.path, self._drawing_process)
+            self._tb = TensorBoardLogger(self.run_dir.path, self._drawing_process, self.rc.logging.figures)
             self._tb.config(OmegaConf.to_yaml(self.cfg, resolve=True))
         return self._tb
 

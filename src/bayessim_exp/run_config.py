@@ -42,6 +42,7 @@ class LoggingConfig:
     max_plot_params: int
     plot_samples: int
     progress: bool
+    figures: bool = True  # a default: run dirs written before the key load as they ran
 
 
 @dataclasses.dataclass

@@ -116,21 +116,31 @@ def best_fit(sims, real, steps: int) -> np.ndarray:
     """The least-squares fit of our model: the parameters inside the prior box whose replays (recorded
     initial states, recorded actions) of the first `steps` steps are closest to the recorded states
     (a 41 x 41 grid, then Nelder-Mead)."""
-    real = real.truncate(steps)
-    n = real.num
+    return best_fits(sims, real, steps, [real.num])[0]
 
-    def cost(theta: torch.Tensor) -> torch.Tensor:
+
+def best_fits(sims, real, steps: int, counts: list[int]) -> list[np.ndarray]:
+    """best_fit of the first n recorded trajectories for each n in `counts`: the grid is replayed once, for the
+    most of them, as a trajectory's squared distances do not depend on the others."""
+    real = real.truncate(steps)
+
+    def distances(theta: torch.Tensor, n: int) -> torch.Tensor:
+        """Squared distance of each trajectory's replay at each theta [T, D] from the recording: [T, n]."""
         which = torch.arange(n).repeat(len(theta))
         out = replay(sims, theta.repeat_interleave(n, 0), real, which).states.cpu().double()  # MJX: on the GPU
-        return (out - real.states.double()[which]).reshape(len(theta), -1).pow(2).sum(1)
+        return (out - real.states.double()[which]).reshape(len(theta), n, -1).pow(2).sum(2)
 
     low, high = sims.task.spec.low, sims.task.spec.high
     axes = [torch.linspace(lo, hi, 41, dtype=torch.float64) for lo, hi in zip(low, high)]
     grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(axes))
-    start = grid[cost(grid).argmin()].numpy()
-    res = minimize(lambda t: float(cost(torch.as_tensor(t)[None])), start, method="Nelder-Mead",
-                   bounds=list(zip(low, high)), options={"xatol": 1e-5, "fatol": 1e-10})
-    return res.x
+    on_grid = distances(grid, max(counts)).cumsum(1)
+    fits = []
+    for n in counts:
+        start = grid[on_grid[:, n - 1].argmin()].numpy()
+        res = minimize(lambda t, n=n: float(distances(torch.as_tensor(t)[None], n).sum()), start,
+                       method="Nelder-Mead", bounds=list(zip(low, high)), options={"xatol": 1e-5, "fatol": 1e-10})
+        fits.append(res.x)
+    return fits
 
 
 def hpd_level(post, theta: np.ndarray, draws: int = 4000) -> float:

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from run_results import without_seconds
 
 from bayessim_exp import api, registry
 from bayessim_exp.artifacts import RunDir
@@ -90,6 +91,18 @@ def test_a_run_that_falls_back_says_so_in_its_summary_results_and_figure_titles(
     assert drawn == [("the prior, handed on in round 1", True), ("the prior, handed on in round 2", True)]
     assert summary_lines(results, tmp_path)[1] == ("  handed on: the prior, not round 2's posterior (the guard's "
                                                    "warnings above; results.json: rounds[-1].guard)")
+
+
+def test_a_run_without_figures_draws_none_and_gives_the_same_results(compose, tmp_path):
+    """logging.figures=false leaves every figure undrawn but takes their draws: the results are those of a run that
+    draws them (test_tasks_pipeline.py's smoke runs leave them out)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    drawn = Pipeline(compose(SMOKE), tmp_path / "drawn", drawing_process=False).run()
+    undrawn = Pipeline(compose(SMOKE + ["logging.figures=false"]), tmp_path / "undrawn").run()
+    assert without_seconds(undrawn) == without_seconds(drawn)
+    tags = EventAccumulator(str(tmp_path / "undrawn"), size_guidance={"images": 0}).Reload().Tags()
+    assert tags["images"] == [] and "guard/ok" in tags["scalars"]
 
 
 def test_a_figure_that_cannot_be_drawn_is_reported_not_fatal(tmp_path, caplog):

@@ -88,13 +88,16 @@ class _InProcess:
 
 
 class TensorBoardLogger:
-    def __init__(self, log_dir: str | Path, drawing_process: bool = True):
+    def __init__(self, log_dir: str | Path, drawing_process: bool = True, figures: bool = True):
+        """figures=False (logging.figures): none drawn; their data are still taken, so the run's random streams and
+        results are those of a run that draws them."""
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(log_dir=str(log_dir))
         self._drawing: ProcessPoolExecutor | _InProcess = _InProcess()
+        self.figures = figures
         # on one CPU a second process draws nothing sooner, and starting it costs more than the drawing itself
-        if drawing_process and usable_cpus() > 1:
+        if figures and drawing_process and usable_cpus() > 1:
             # spawn: a forked copy of a process that holds CUDA and JAX state is not safe
             with _interpreter_start_method():  # the process starts at the first submit
                 self._drawing = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
@@ -103,6 +106,8 @@ class TensorBoardLogger:
         self._pending: list[tuple[str, int, Future]] = []  # figures being drawn, in the order asked for
 
     def _figure(self, tag: str, step: int, name: str, *args) -> None:
+        if not self.figures:
+            return
         try:
             self._pending.append((tag, step, self._drawing.submit(_png, name, *args)))
         except BrokenProcessPool as exc:  # the drawing process died: the figures are drawn here from now on

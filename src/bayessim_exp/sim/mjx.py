@@ -138,7 +138,6 @@ class MjxSimulator(Simulator):
         self._rollout_fn = jit(self._scan, lambda leaves, data, obs, broken, act: (data, obs, broken, 0, 0, 0, 0, 0))
         self._closed_loops: dict[Callable, Callable] = {}  # jitted per policy function
 
-
     def pads(self, num_rows: int) -> bool:
         """A batch below native_below runs on native MuJoCo (mjx_backend) even after a chunk-sized simulator exists:
         padded, a model check's few hundred simulations would cost a whole chunk's rollout."""

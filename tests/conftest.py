@@ -22,7 +22,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
 # JAX's persistent compilation cache, one per process of the suite (its subprocesses inherit it): tests build many
 # simulators of the same tiny models, and a new simulator's programs are compiled again where JAX's in-memory cache
-# misses (docs/benchmarks.md: the tiny-model MJX tests' CPU seconds 444 -> 324). Every program, the small ones too.
+# misses (docs/benchmarks.md, "the suite's cheaper parts"). Every program, the small ones too.
 if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="bayessim-tests-jax-")
     atexit.register(shutil.rmtree, os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)

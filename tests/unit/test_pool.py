@@ -46,7 +46,7 @@ def test_a_batch_the_simulator_does_not_pad_runs_in_one_of_its_own_size(compose)
     native MuJoCo there), never padded into a chunk-sized rollout."""
     from types import SimpleNamespace
 
-    from bayessim_exp.sim.mjx import MjxSimulator
+    from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator
 
     class PadsFromThree(NativeSimulator):
         def pads(self, num_rows: int) -> bool:
@@ -58,7 +58,8 @@ def test_a_batch_the_simulator_does_not_pad_runs_in_one_of_its_own_size(compose)
     assert pool.rollout(params, Zeros(), horizon=5, seed=3).num == 10 and sorted(pool._sims) == [2, 4]
     assert pool.rollout(params[:7], Zeros(), horizon=5, seed=3).num == 7 and sorted(pool._sims) == [2, 4]
     # MJX's rule: pad from native_below on (below it the sim group's factory builds native MuJoCo)
-    mjx = SimpleNamespace(cfg=SimpleNamespace(native_below=1024))
+    mjx = SimpleNamespace(cfg=MjxConfig(max_abs_qvel=1.0e4, cache_dir=None, nthread=1, native_below=1024, impl="jax",
+                                        tuning={}))
     assert not MjxSimulator.pads(mjx, 200) and MjxSimulator.pads(mjx, 1024)
 
 

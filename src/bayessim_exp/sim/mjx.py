@@ -72,6 +72,10 @@ class MjxConfig:
             raise ConfigError(f"sim.impl={self.impl!r} not allowed; allowed: {', '.join(IMPLS)}")
         check_tuning(self.tuning)
 
+    def runs_natively(self, num_envs: int) -> bool:
+        """A batch this small simulates on native MuJoCo: both the sim group's factory and the padding read it."""
+        return num_envs < self.native_below
+
 
 def to_torch(x: Any) -> torch.Tensor:
     return torch.from_dlpack(x)
@@ -141,7 +145,7 @@ class MjxSimulator(Simulator):
     def pads(self, num_rows: int) -> bool:
         """A batch below native_below runs on native MuJoCo (mjx_backend) even after a chunk-sized simulator exists:
         padded, a model check's few hundred simulations would cost a whole chunk's rollout."""
-        return num_rows >= self.cfg.native_below
+        return not self.cfg.runs_natively(num_rows)
 
     def _jit_maker(self, names: list[str], constants: list[str], on_host: list[str]) -> Callable:
         """jax.jit, or where `cache_dir` is set and MJX runs its JAX implementation, a jit whose traced
@@ -411,7 +415,7 @@ def mjx_backend(cfg: MjxConfig):
                 log.warning("sim=mjx %s: native MuJoCo on this machine's CPUs measured faster than MJX's %s "
                             "implementation for this task (sim.tuning.native_faster_on; table in "
                             "docs/benchmarks.md); sim=auto would simulate natively", task.name, impl.name)
-        if num_envs < cfg.native_below:
+        if cfg.runs_natively(num_envs):
             return NativeSimulator(task, num_envs, native, model=impl.model(task))
         return MjxSimulator(task, num_envs, cfg)
 

@@ -23,6 +23,7 @@ from .machine import fit_to_machine
 from .models.base import PosteriorModel
 from .real import RealSource
 from .run_config import RunConfig
+from .sim import integrators
 from .sim.base import Policy
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
@@ -68,6 +69,7 @@ class Components:
     x_dim: int  # the summarizer's output width for this task and horizon
     model: Callable[[], PosteriorModel]  # a fresh posterior model q(theta | x) for this task and summarizer
     policy: CollectPolicies  # without an actor: the pipeline gives it the RL component's
+    integrators: tuple[str, ...]  # what the method's simulations alternate between (sim/integrators.py's for_run)
 
     @property
     def device(self) -> torch.device:
@@ -95,7 +97,8 @@ def build_components(cfg: DictConfig, rc: RunConfig) -> Components:
     real.check(rc.collect.horizon)
     if rc.logging.plot_params is not None:
         task.spec.subset(rc.logging.plot_params)
-    return Components(cfg, rc, task, prior, sims, summarizer, real, x_dim, model, policy)
+    return Components(cfg, rc, task, prior, sims, summarizer, real, x_dim, model, policy,
+                      integrators.for_run(cfg))
 
 
 def build_rl(cfg: DictConfig, comp: Components,
@@ -108,5 +111,7 @@ def build_rl(cfg: DictConfig, comp: Components,
 def build_method(cfg: DictConfig, comp: Components, policy: PolicyFactory) -> InferenceMethod:
     """The inference method, handed what it uses; `policy`: the collect policy (a pipeline's acts with the RL
     component's actor)."""
-    inputs = MethodInputs(comp.task, comp.prior, comp.sims, comp.summarizer, comp.rc, comp.device, comp.model, policy)
+    # the method simulates in slots that alternate between comp.integrators; the real stage and RL keep the model's own
+    inputs = MethodInputs(comp.task, comp.prior, comp.sims.alternating(comp.integrators), comp.summarizer, comp.rc,
+                          comp.device, comp.model, policy)
     return registry.build("method", cfg.method, inputs=inputs)

@@ -26,6 +26,15 @@ def auto_choice(impl: str, tuning: Mapping[str, Any]) -> str:
     return "native" if native_measured_faster(impl, tuning) else "mjx"
 
 
+def simulates_on_mjx(sim: Mapping[str, Any]) -> bool:
+    """Whether a run's large batches simulate on MJX under the sim config `sim` on this machine."""
+    if sim.get("name") == "mjx":
+        return True
+    if sim.get("name") != "auto" or not gpu_visible():
+        return False
+    return auto_choice(resolve_impl(sim["impl"], sim["tuning"]), sim["tuning"]) == "mjx"
+
+
 def auto_backend(cfg: MjxConfig):
     """The same settings as sim=mjx; on native MuJoCo nthread is the simulation threads."""
     native = native_backend(NativeConfig(nthread=cfg.nthread, max_abs_qvel=cfg.max_abs_qvel))

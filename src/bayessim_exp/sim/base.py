@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
 import torch
 
+from ..errors import ConfigError
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec
 from .trajectories import Trajectories
@@ -63,6 +65,12 @@ class Simulator(abc.ABC):
         """Whether a batch of num_rows (< num_envs) runs in this simulator, padded, rather than in one of its own
         size: where each size would be a compilation (MJX)."""
         return False
+
+    def alternate_integrators(self, names: Sequence[str]) -> None:
+        """Slot j integrates with names[j % len(names)] (sim/integrators.py); a backend that compiles one
+        integrator for every slot (MJX) cannot."""
+        raise ConfigError(f"{type(self).__name__} simulates every slot with one integrator; alternating "
+                          f"{list(names)} needs native MuJoCo (sim=native)")
 
     # what a backend implements ------------------------------------------------------
     @classmethod

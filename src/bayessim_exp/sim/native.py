@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import types
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -15,6 +16,7 @@ from ..machine import usable_cpus
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec
 from .base import Simulator, broke_down
+from .integrators import codes as integrator_codes
 
 # warnings that mean the integration broke down (MuJoCo then silently resets the data)
 _DIVERGENCE_WARNINGS = [
@@ -51,6 +53,9 @@ class NativeSimulator(Simulator):
         for field in task.data_fields:  # outputs are copied out only after calls made once they are bound
             self.batch.bind(field)
         self._obs = np.zeros((num_envs, task.obs_dim))
+
+    def alternate_integrators(self, names: Sequence[str]) -> None:
+        self.batch.expand("opt.integrator")[:] = np.resize(integrator_codes(names, self.model), self.num_envs)
 
     @classmethod
     def check_spec(cls, spec: ParamSpec) -> None:

@@ -9,26 +9,40 @@ runs on native MuJoCo in a simulator of its own size).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import torch
 
 from ..tasks.base import Task
 from .base import Policy, Simulator
+from .integrators import varies
 from .trajectories import Trajectories
 
 
 class SimulatorPool:
-    def __init__(self, make: Callable[[Task, int], Simulator], task: Task, chunk: int):
+    """`integrators`: MuJoCo integrators every simulator's slots alternate between (sim/integrators.py); empty:
+    the model's own."""
+
+    def __init__(self, make: Callable[[Task, int], Simulator], task: Task, chunk: int,
+                 integrators: Sequence[str] = ()):
         if chunk < 1:
             raise ValueError(f"chunk must be >= 1, got {chunk}")
         self.make, self.task, self.chunk = make, task, chunk
+        self.integrators = tuple(integrators)
         self._sims: dict[int, Simulator] = {}
+
+    def alternating(self, integrators: Sequence[str]) -> SimulatorPool:
+        """A pool of simulators of its own whose slots alternate between `integrators`; this pool where they are
+        the model's own integrator alone."""
+        return SimulatorPool(self.make, self.task, self.chunk, integrators) if varies(integrators) else self
 
     def get(self, num_envs: int) -> Simulator:
         if num_envs not in self._sims:
-            self._sims[num_envs] = self.make(self.task, num_envs)
+            sim = self.make(self.task, num_envs)
+            if self.integrators:
+                sim.alternate_integrators(self.integrators)
+            self._sims[num_envs] = sim
         return self._sims[num_envs]
 
     def rollout(self, params: torch.Tensor | np.ndarray, policy: Policy, horizon: int, seed: int,

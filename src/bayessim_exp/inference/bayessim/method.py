@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Callable
+from typing import Any
 
 import torch
 
@@ -30,6 +31,7 @@ from ...distributions.mixture import GaussianMixture, TruncatedMixture
 from ...distributions.probit import ProbitPosterior, standard_normal_prior
 from ...errors import ConfigError, PosteriorError
 from ...models.base import column_scale
+from ...sim.integrators import check_names as check_integrators
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, MethodInputs, handed_on_name, real_trajectories
@@ -60,6 +62,7 @@ class BayesSimConfig:
     on_guard: str  # a round the guard flags: warn | fallback | stop (diagnostics/guard.py)
     escape: str  # where a round whose real data lie outside its simulations proposes the next (escape.py)
     importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
+    integrators: Any  # auto or a list: the integrators inputs.sims alternate between (components.build_method)
 
     def validate(self) -> None:
         if self.parameter_space not in PARAMETER_SPACES:
@@ -73,6 +76,7 @@ class BayesSimConfig:
             raise ConfigError(f"on_guard={self.on_guard!r} not allowed; allowed: {', '.join(ACTIONS)}")
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
+        check_integrators(self.integrators)
         if self.importance_draws < 1000:
             raise ConfigError(f"importance_draws must be >= 1000 (the importance-sampled posterior's base draws), "
                               f"got {self.importance_draws}")

@@ -10,6 +10,8 @@ over whole `rollout` calls: resets with per-env parameters (fields and derived c
 the device, mjx_constants; benchmarks/reset_cost.py splits a reset's cost), the open-loop random
 policy's actions, observations, rewards, divergence checks and the trajectories handed to torch. Rows per task:
   native      NativeSimulator on all CPU threads, randomized: the baseline in the same run
+  native-rk4  the same with its slots alternating the model's integrator and RK4 (what BayesSim simulates with
+              recorded data: sim/integrators.py)
   mjx-plain   plain MJX on the nominal model with the task's MJX tuning (conf/mjx_tuning; vmap(mjx.step) in lax.scan,
               random controls, no task code)
   mjx-fixed   MjxSimulator with randomize=False (one model for every slot)
@@ -39,6 +41,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from bayessim_exp import api, registry  # noqa: E402
+from bayessim_exp.sim.integrators import RECORDED_DATA  # noqa: E402
 from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
 from bayessim_exp.sim.mjx_impl import resolve_impl  # noqa: E402
 from bayessim_exp.sim.mjx_setup import jax_setup  # noqa: E402
@@ -140,7 +143,7 @@ def main():
 
     def record(task, backend, envs, horizon, first, median):
         rate = None if median is None else envs * horizon / median
-        rows.append({"task": task.name, "impl": "-" if backend == "native" else resolve_impl(args.impl, cfg.tuning), "backend": backend, "envs": envs, "horizon": horizon,
+        rows.append({"task": task.name, "impl": "-" if backend.startswith("native") else resolve_impl(args.impl, cfg.tuning), "backend": backend, "envs": envs, "horizon": horizon,
                      "frame_skip": task.frame_skip, "first_s": round(first, 2), "median_s": median,
                      "env_steps_per_s": rate})
         shown = "-" if rate is None else f"{rate:,.0f}"
@@ -156,6 +159,11 @@ def main():
             if "native" in rows_wanted and not args.compile_only:
                 sim = NativeSimulator(task, args.native_envs, NativeConfig(nthread=0, max_abs_qvel=1.0e4))
                 record(task, "native", args.native_envs, args.native_horizon,
+                       *simulator_rollouts(task, args.native_envs, args.native_horizon, sim, reps))
+            if "native-rk4" in rows_wanted and not args.compile_only:
+                sim = NativeSimulator(task, args.native_envs, NativeConfig(nthread=0, max_abs_qvel=1.0e4))
+                sim.alternate_integrators(RECORDED_DATA)
+                record(task, "native-rk4", args.native_envs, args.native_horizon,
                        *simulator_rollouts(task, args.native_envs, args.native_horizon, sim, reps))
             baselines = list(map(int, args.baseline_envs.split(",")))
             if "mjx-plain" in rows_wanted:

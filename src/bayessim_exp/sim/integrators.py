@@ -56,10 +56,10 @@ def varies(names: Sequence[str]) -> bool:
 
 
 def for_run(cfg: DictConfig) -> tuple[str, ...]:
-    """The integrators a run's method simulates with, alternating slot by slot (() for a method without
-    `integrators`, as sysid and simopt, which fit replays row by row): auto is the model's own where the real data are our own simulator's
-    (real=surrogate) and [model, RK4] for recorded data, and the model's own on MJX, which compiles one integrator
-    for every simulation (said once); a list that alternates on MJX is refused."""
+    """The integrators a run's method simulates with, alternating slot by slot: () for a method without
+    `integrators` (sysid and simopt fit replays row by row); auto is the model's own where the real data are our own
+    simulator's (real=surrogate) and RECORDED_DATA otherwise, and the model's own on MJX, which compiles one
+    integrator for every simulation (said once); a list that alternates on MJX is refused."""
     names = cfg.method.get("integrators")
     if names is None:
         return ()

@@ -2,13 +2,16 @@
 
     OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/summary_bias.py --out /tmp/bias/none --offset 0
     OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/summary_bias.py --out /tmp/bias/small --offset 0.2
+    OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/summary_bias.py --out /tmp/bias/oracle --offset 0.2 --feature-noise 1
 
 One Pendulum trajectory of our simulator at (1.3, 0.6) is the real data (20 steps, random actions); the run's
 summaries of it (never of a simulation) get `--offset` times the features' spread over 500 prior draws added in
 features 5 and 20 of the 80 the start summarizer gives. The run: 5,000 simulations of 20 steps a round, two rounds,
 the defaults otherwise. Prints the final posterior's gain at the truth over the prior, the truth's HPD level, the
 rounds' temperatures and whether the final round flagged a mismatch (docs/statistics.md, 'The error read feature
-by feature').
+by feature'). `--feature-noise K` is an oracle error model: every simulation's summaries (training, held-out,
+replays, simulated sets) get Gaussian noise of K times the spread in the offset features, so q learns to read the
+parameters without them: what a summary error model that found those features could keep.
 """
 
 from __future__ import annotations
@@ -31,6 +34,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True, help="a fresh directory for the log and the run")
     ap.add_argument("--offset", type=float, default=0.2, help="the offset in units of each feature's prior spread")
+    ap.add_argument("--overrides", nargs="*", default=[], help="added to the run (e.g. method.integrators=[model])")
+    ap.add_argument("--feature-noise", type=float, default=0.0,
+                    help="noise on the simulations' offset features, in units of their prior spread (0: none)")
     args = ap.parse_args()
 
     from independent_pendulum import hpd_level
@@ -61,17 +67,30 @@ def main() -> None:
         traj.recorded = True
         return traj
 
+    noise = torch.zeros(len(spread), dtype=torch.float64)
+    noise[FEATURES] = args.feature_noise * spread[FEATURES]
+    generator = torch.Generator().manual_seed(99)
+
+    def noisy(x):
+        return x + (torch.randn(x.shape, generator=generator, dtype=torch.float64) * noise).to(x.dtype)
+
     def with_offset(self, traj):
         x = summaries(self, traj)
-        return x + offset.to(x.dtype) if getattr(traj, "recorded", False) else x
+        return x + offset.to(x.dtype) if getattr(traj, "recorded", False) else noisy(x)
 
-    method.real_trajectories, method.BayesSim._summaries = marked, with_offset
+    summarized = method.summarized  # the collect's simulations, as the fit and its held-out checks read them
+
+    def summarized_noisy(collected, summarize, device):
+        return summarized(collected, lambda traj: noisy(summarize(traj).cpu().double()).float(), device)
+
+    method.real_trajectories, method.BayesSim._summaries, method.summarized = marked, with_offset, summarized_noisy
     results = api.run(["real=file", f"real.path={args.out / 'robot.npz'}", "collect.trajectories=5000",
-                       "collect.horizon=20", "rounds=2", "diagnostics.predictive_sims=0", "logging.progress=false"],
+                       "collect.horizon=20", "rounds=2", "diagnostics.predictive_sims=0", "logging.progress=false",
+                       *args.overrides],
                       out_dir=args.out / "run")
     posterior = api.load_run(args.out / "run").posterior()
     truth = torch.tensor([TRUTH], dtype=torch.float64)
-    print(json.dumps({"offset": args.offset, "gain": float(posterior.log_prob(truth) - prior.log_prob(truth)),
+    print(json.dumps({"offset": args.offset, "feature_noise": args.feature_noise, "overrides": args.overrides, "gain": float(posterior.log_prob(truth) - prior.log_prob(truth)),
                       "level": float(hpd_level(posterior, TRUTH)),
                       "temperatures": [r["temperature"] for r in results["rounds"]],
                       "flagged": results["rounds"][-1]["mismatch"]["flagged"]}))

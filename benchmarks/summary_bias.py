@@ -90,7 +90,8 @@ def main() -> None:
                       out_dir=args.out / "run")
     posterior = api.load_run(args.out / "run").posterior()
     truth = torch.tensor([TRUTH], dtype=torch.float64)
-    print(json.dumps({"offset": args.offset, "feature_noise": args.feature_noise, "overrides": args.overrides, "gain": float(posterior.log_prob(truth) - prior.log_prob(truth)),
+    print(json.dumps({"offset": args.offset, "feature_noise": args.feature_noise, "overrides": args.overrides,
+                      "gain": float(posterior.log_prob(truth) - prior.log_prob(truth)),
                       "level": float(hpd_level(posterior, TRUTH)),
                       "temperatures": [r["temperature"] for r in results["rounds"]],
                       "flagged": results["rounds"][-1]["mismatch"]["flagged"]}))

@@ -107,10 +107,10 @@ def test_another_integrator_s_data_keep_the_truth_and_most_of_the_information(tm
     """Issue 44's model error with a known answer: one trajectory of the same rod physics integrated by RK4 with 50
     substeps at each of four hidden parameter sets. Our simulator's own integrator (implicitfast at 10 ms) differs
     most in the early steps, which the summaries weigh most, so simulations with it alone read that error as a
-    parameter shift; simulations alternating it with RK4 (method.integrators=auto for recorded data on native MuJoCo:
-    sim=auto on a GPU takes MJX, which cannot alternate, and fails this test) hold the truth
-    inside the 90 % region in at least 3 of the 4 and keep a median gain of +6 nats at it. With
-    method.integrators=[model] both fail (docs/statistics.md, 'Integrators as a nuisance', has the figures)."""
+    parameter shift; simulations alternating it with RK4 (method.integrators=auto for recorded data, on native
+    MuJoCo) hold the truth inside the 90 % region in at least 3 of the 4 and keep a median gain of +6 nats at it.
+    With the model's integrator alone (method.integrators=[model], or MJX: sim=auto on a GPU machine) the test fails
+    (docs/statistics.md, 'Integrators as a nuisance')."""
     levels, gains = [], []
     for k, (mass, length) in enumerate(FOREIGN):
         path = tmp_path / f"rk4_{k}.npz"

@@ -62,6 +62,8 @@ def summary_lines(results: dict, out_dir) -> list[str]:
                      + (f"  (true {results['true_params'][name]:.4g})" if results["true_params"] else ""))
     if last["log_prob_gain"] is not None:
         lines.append(f"  log p(true | real) - log p(true) = {last['log_prob_gain']:.2f} nats")
+    if len(results.get("integrators", [])) > 1:  # older runs lack the key
+        lines.append(f"  simulated with the integrators {', '.join(results['integrators'])} alternating (method.integrators)")
     return lines
 
 

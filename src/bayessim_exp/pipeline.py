@@ -43,6 +43,7 @@ class Pipeline:
         comp = build_components(cfg, self.rc)  # every config error surfaces here or below, before any simulation
         self.cfg = cfg = comp.cfg  # with this machine's choices: what config.yaml records
         self.task, self.prior, self.real_source = comp.task, comp.prior, comp.real
+        self.integrators = comp.integrators  # what the method's simulations alternated between (sim/integrators.py)
         self.rl = build_rl(cfg, comp, self._posterior)
         self.policy: CollectPolicies = dataclasses.replace(comp.policy, actor=self.rl.actor)
         self.method: InferenceMethod = build_method(cfg, comp, self.policy)
@@ -108,6 +109,8 @@ class Pipeline:
             "true_params": None if true is None else dict(zip(names, map(float, true))),
             # where the truth comes from (real.truth: task, prior, nominal); None for recorded data
             "truth_source": self.cfg.real.get("truth"),
+            # the integrators the method's slots alternated between ([] for a method without them)
+            "integrators": list(self.integrators),
             "prior": {"low": dict(zip(names, map(float, self.task.spec.low))),
                       "high": dict(zip(names, map(float, self.task.spec.high)))},
             "rounds": [],

@@ -9,6 +9,7 @@ import torch
 from independent_pendulum import best_fit, best_fits, hpd_level
 
 from bayessim_exp import api, registry
+from bayessim_exp.__main__ import summary_lines
 from bayessim_exp.inference.bayessim.combination import combine
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.real import load_trajectories
@@ -120,5 +121,8 @@ def test_another_integrator_s_data_keep_the_truth_and_most_of_the_information(tm
                           out_dir=tmp_path / f"run_{k}")
         levels.append(results["rounds"][-1]["truth"]["hpd_level"])
         gains.append(results["rounds"][-1]["log_prob_gain"])
+    assert results["integrators"] == ["model", "RK4"]  # what the run says it simulated with
+    assert summary_lines(results, tmp_path)[-1] == ("  simulated with the integrators model, RK4 alternating "
+                                                   "(method.integrators)")
     assert sum(level < 0.9 for level in levels) >= 3, levels
     assert float(np.median(gains)) >= 6.0, gains

@@ -4,10 +4,10 @@
     OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/summary_bias.py --out /tmp/bias/small --offset 0.2
     OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/summary_bias.py --out /tmp/bias/oracle --offset 0.2 --feature-noise 1
 
-One Pendulum trajectory of our simulator at (1.3, 0.6) is the real data (20 steps, random actions); the run's
-summaries of it (never of a simulation) get `--offset` times the features' spread over 500 prior draws added in
-features 5 and 20 of the 80 the start summarizer gives. The run: 5,000 simulations of 20 steps a round, two rounds,
-the defaults otherwise. Prints the final posterior's gain at the truth over the prior, the truth's HPD level, the
+One Pendulum trajectory of our simulator at `--truth` (default (1.3, 0.6)) is the real data (20 steps, random
+actions); the run's summaries of it (never of a simulation) get `--offset` times the features' spread over 500
+prior draws added in `--features` (default 5 and 20) of the 80 the start summarizer gives. The run: `--sims`
+(5,000) simulations of 20 steps a round, two rounds, the defaults otherwise. Prints the final posterior's gain at the truth over the prior, the truth's HPD level, the
 rounds' temperatures and whether the final round flagged a mismatch (docs/statistics.md, 'The error read feature
 by feature'). `--feature-noise K` is an oracle error model: every simulation's summaries (training, held-out,
 replays, simulated sets) get Gaussian noise of K times the spread in the offset features, so q learns to read the
@@ -26,14 +26,15 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "integration"))
 
-TRUTH = [1.3, 0.6]
-FEATURES = [5, 20]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True, help="a fresh directory for the log and the run")
     ap.add_argument("--offset", type=float, default=0.2, help="the offset in units of each feature's prior spread")
+    ap.add_argument("--truth", type=float, nargs=2, default=[1.3, 0.6], help="the real pendulum's mass and length")
+    ap.add_argument("--features", type=int, nargs="+", default=[5, 20], help="the offset features (of 80)")
+    ap.add_argument("--sims", type=int, default=5000, help="simulations a round")
     ap.add_argument("--overrides", nargs="*", default=[], help="added to the run (e.g. method.integrators=[model])")
     ap.add_argument("--feature-noise", type=float, default=0.0,
                     help="noise on the simulations' offset features, in units of their prior spread (0: none)")
@@ -52,12 +53,12 @@ def main() -> None:
     prior = registry.build("prior", cfg.prior, spec=task.spec)
     summarizer = registry.build("summarizer", cfg.summarizer)
     native = registry.build("sim", {"name": "native"})
-    real = native(task, 1).rollout(np.array([TRUTH]), RandomPolicy(1, 7), 20, 7)
-    save_trajectories(args.out / "robot.npz", real, TRUTH, task.spec.names)
+    real = native(task, 1).rollout(np.array([args.truth]), RandomPolicy(1, 7), 20, 7)
+    save_trajectories(args.out / "robot.npz", real, args.truth, task.spec.names)
     theta = prior.sample((500,), generator=torch.Generator().manual_seed(0)).numpy()
     spread = summarizer(native(task, 500).rollout(theta, RandomPolicy(1, 1), 20, 1)).double().std(0)
     offset = torch.zeros(len(spread), dtype=torch.float64)
-    offset[FEATURES] = args.offset * spread[FEATURES]
+    offset[args.features] = args.offset * spread[args.features]
 
     # the offset goes on the real trajectories' summaries alone: the run's own real_trajectories, marked
     real_of, summaries = method.real_trajectories, method.BayesSim._summaries
@@ -68,7 +69,7 @@ def main() -> None:
         return traj
 
     noise = torch.zeros(len(spread), dtype=torch.float64)
-    noise[FEATURES] = args.feature_noise * spread[FEATURES]
+    noise[args.features] = args.feature_noise * spread[args.features]
     generator = torch.Generator().manual_seed(99)
 
     def noisy(x):
@@ -84,17 +85,18 @@ def main() -> None:
         return summarized(collected, lambda traj: noisy(summarize(traj).cpu().double()).float(), device)
 
     method.real_trajectories, method.BayesSim._summaries, method.summarized = marked, with_offset, summarized_noisy
-    results = api.run(["real=file", f"real.path={args.out / 'robot.npz'}", "collect.trajectories=5000",
+    results = api.run(["real=file", f"real.path={args.out / 'robot.npz'}", f"collect.trajectories={args.sims}",
                        "collect.horizon=20", "rounds=2", "diagnostics.predictive_sims=0", "logging.progress=false",
                        *args.overrides],
                       out_dir=args.out / "run")
     posterior = api.load_run(args.out / "run").posterior()
-    truth = torch.tensor([TRUTH], dtype=torch.float64)
-    print(json.dumps({"offset": args.offset, "feature_noise": args.feature_noise, "overrides": args.overrides,
+    truth = torch.tensor([args.truth], dtype=torch.float64)
+    print(json.dumps({"truth": args.truth, "features": args.features, "offset": args.offset, "feature_noise": args.feature_noise, "overrides": args.overrides,
                       "gain": float(posterior.log_prob(truth) - prior.log_prob(truth)),
-                      "level": float(hpd_level(posterior, TRUTH)),
+                      "level": float(hpd_level(posterior, args.truth)),
                       "temperatures": [r["temperature"] for r in results["rounds"]],
-                      "flagged": results["rounds"][-1]["mismatch"]["flagged"]}))
+                      "flagged": results["rounds"][-1]["mismatch"]["flagged"],
+                      "summary_error": results["rounds"][-1]["summary_error"]}))
 
 
 if __name__ == "__main__":

@@ -64,6 +64,12 @@ def summary_lines(results: dict, out_dir) -> list[str]:
         lines.append(f"  log p(true | real) - log p(true) = {last['log_prob_gain']:.2f} nats")
     if len(results.get("integrators", [])) > 1:  # older runs lack the key
         lines.append(f"  simulated with the integrators {', '.join(results['integrators'])} alternating (method.integrators)")
+    source = handed_on["round"] if handed_on else rounds  # the round whose posterior was handed on (0: the prior)
+    if source > 0 and (error := results["rounds"][source - 1].get("summary_error")):  # older runs: no key
+        features = error["features"]
+        lines.append(f"  simulated summaries with noise in {len(features)} feature{'s' * (len(features) > 1)} the real "
+                     f"data's replays left unexplained: {', '.join(map(str, features[:8]))}"
+                     f"{', ...' if len(features) > 8 else ''} (method.summary_error)")
     return lines
 
 

@@ -148,3 +148,69 @@ def test_a_parameter_every_replay_shares_gets_no_slope_and_its_value_as_implied(
     assert torch.isfinite(implied).all() and torch.isfinite(residual).all()
     assert implied[0, 0] == pytest.approx(0.5 + float(theta[:, 0].mean()) - float(z.mean()) / 2, abs=0.01)
     assert implied[0, 1] == 2.0
+
+
+def _noisy_linear(A: torch.Tensor, seed: int, std: float = 0.01):
+    """A simulator whose summaries are linear in the parameters (slopes A [F, D]) plus Gaussian noise of `std`."""
+    g = torch.Generator().manual_seed(seed)
+    return lambda theta, which: _linear_trajectories(theta @ A.T + std * torch.randn(len(theta), len(A), generator=g,
+                                                                                      dtype=torch.float64))
+
+
+def _linear_check(A, real, posterior_variance: float, seed: int = 0, noise=None):
+    centre = torch.tensor([[1.0, 0.5]], dtype=torch.float64)
+    posterior = GaussianMixture(torch.zeros(1), centre, posterior_variance * torch.eye(2, dtype=torch.float64)[None])
+    prior = GaussianMixture(torch.zeros(1), centre, torch.eye(2, dtype=torch.float64)[None])
+    return replayed_check(_noisy_linear(A, seed + 1), real, posterior, prior,
+                          summarize=lambda traj: traj.states[:, 0].double(), num=400, seed=seed, alpha=0.01,
+                          max_distance_ratio=0.15, noise=noise)
+
+
+def test_the_feature_error_is_what_least_squares_leaves_of_an_offset_in_the_summaries_units():
+    """Summaries linear in 2 parameters with a little simulation noise, real data with an offset in two of six
+    features: what no parameter explains of it, feature by feature, is the offset's residual from the least-squares
+    projection onto the slopes (in the standardised features the check fits in), read back in the summaries' own
+    units: here computed from A, the offset and the prior replays' spread alone."""
+    A = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0], [1.0, -1.0], [0.5, 2.0]], dtype=torch.float64)
+    offset = torch.tensor([0.0, 0.0, 0.0, 0.0, 0.3, -0.2], dtype=torch.float64)
+    real = _linear_trajectories(torch.tensor([[1.0, 0.5]], dtype=torch.float64) @ A.T + offset)
+    check = _linear_check(A, real, 0.01)
+    prior = torch.randn(400, 2, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    scale = (prior @ A.T).std(0) * math.sqrt(6)  # standardised feature = summary / scale
+    B = A / scale[:, None]
+    hat = B @ torch.linalg.solve(B.T @ B, B.T)
+    expected = (((torch.eye(6, dtype=torch.float64) - hat) @ (offset / scale)) * scale) ** 2
+    # the check's scale is its own 400 prior draws' spread (about 3.5 % off each): a square's and a hat's worth
+    torch.testing.assert_close(check.feature_error, expected, rtol=0.2, atol=0)
+
+
+def test_data_the_simulator_reproduces_leave_no_feature_error():
+    """Real summaries that are a simulation like the replays: no feature read as unexplained in 20 checks of 400
+    replays each (the bound is Bonferroni's over the features at alpha = 0.01, beyond every replay)."""
+    A = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0], [1.0, -1.0], [0.5, 2.0]], dtype=torch.float64)
+    centre = torch.tensor([[1.0, 0.5]], dtype=torch.float64)
+    read = 0
+    for seed in range(20):
+        g = torch.Generator().manual_seed(1000 + seed)
+        real = _linear_trajectories(centre @ A.T + 0.01 * torch.randn(1, 6, generator=g, dtype=torch.float64))
+        read += bool((_linear_check(A, real, 0.01, seed=seed).feature_error > 0).any())
+    assert read <= 1
+
+
+def test_replays_with_the_modelled_error_hold_the_real_data_and_the_flag_stays_on_the_simulator():
+    """A posterior far narrower than an offset in two features: the real data's implied parameters lie outside
+    the replays'. With the offset's size as the error model's noise in those features, the replays hold them (and
+    no model error is left to widen for), while what the simulator alone leaves unexplained (residual, its
+    p-value, the flag, the feature error) reads the same."""
+    from bayessim_exp.inference.bayessim.summary_error import SummaryError
+
+    A = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0], [1.0, -1.0], [0.5, 2.0]], dtype=torch.float64)
+    offset = torch.tensor([0.0, 0.0, 0.0, 0.0, 0.3, -0.2], dtype=torch.float64)
+    real = _linear_trajectories(torch.tensor([[1.0, 0.5]], dtype=torch.float64) @ A.T + offset)
+    clean = _linear_check(A, real, 1e-4)
+    modelled = _linear_check(A, real, 1e-4, noise=SummaryError(offset.abs()))
+    assert clean.too_narrow == [0] and modelled.too_narrow == []
+    assert float(clean.model_error_covariance.trace()) > 0 and float(modelled.model_error_covariance.trace()) == 0
+    assert modelled.residual == clean.residual and modelled.residual_p_value == clean.residual_p_value
+    assert modelled.flagged == clean.flagged
+    assert torch.equal(modelled.feature_error, clean.feature_error)

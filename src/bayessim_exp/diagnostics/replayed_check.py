@@ -31,6 +31,14 @@ that pin a parameter down costs that parameter's. (Until 6bdc798 it was r^2 G^-1
 excess: as if every feature carried all of the error, for an error spread over F features about F times the
 variance; docs/statistics.md has what each kept on the foreign-dynamics benchmark.)
 
+The same excess read as a summary error model (inference/bayessim/summary_error.py): `feature_error`, per
+feature in the summaries' own units, the real residual's square where it lies beyond every replay's and beyond
+a Bonferroni bound (alpha over the features) on the replays' scale there (their median square over chi^2_1's
+median), averaged over the real trajectories; 0 elsewhere. With a `noise` error model the replays' summaries
+get its noise before the implied parameters, their p-values and `model_error_covariance` are read (the real
+data are then a replay plus the modelled error), while the residuals, the flag and `feature_error` stay on
+the replays as simulated: what the simulator itself leaves unexplained.
+
 Two readings (docs/statistics.md):
 - `too_narrow`: p <= alpha, the real data's implied parameters lie outside the posterior. Either the
   posterior misses the truth or no parameter value reproduces the data exactly (a simulator slightly
@@ -72,6 +80,7 @@ class ReplayCheck:
     prior_states: torch.Tensor
     posterior_covariance: torch.Tensor  # [D, D] of the replayed draws
     model_error_covariance: torch.Tensor  # [D, D] (module docstring)
+    feature_error: torch.Tensor  # [F] variances in the summaries' units (module docstring)
 
     @property
     def too_narrow(self) -> list[int]:
@@ -105,9 +114,10 @@ def _excess(residual: float, baseline: float) -> float:
 
 def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories], real: Trajectories,
                    posterior, prior, *, summarize: Callable[[Trajectories], torch.Tensor], num: int, seed: int,
-                   alpha: float, max_distance_ratio: float) -> ReplayCheck:
+                   alpha: float, max_distance_ratio: float, noise=None) -> ReplayCheck:
     """simulate(params [N, D], which [N]) replays real trajectory which[k] at params[k] (replay.replay);
-    summarize(trajectories) -> [N, F], the run's summarizer."""
+    summarize(trajectories) -> [N, F], the run's summarizer; noise: the run's summary error model
+    (inference/bayessim/summary_error.py) or None."""
     n = real.num
     which = torch.arange(n).repeat_interleave(num)
     g = torch.Generator().manual_seed(seed)  # its own stream: the check never moves the inference's draws
@@ -116,14 +126,16 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
     post, pri = simulate(theta_post, which), simulate(theta_prior, which)
     x_post = summarize(post).double().reshape(n, num, -1)
     x_prior = summarize(pri).double().reshape(n, num, -1)
+    x_noisy = x_post if noise is None else noise.add(x_post, g)
     ok_post = (~post.diverged.cpu()).reshape(n, num) & torch.isfinite(x_post).all(-1)
     ok_prior = (~pri.diverged.cpu()).reshape(n, num) & torch.isfinite(x_prior).all(-1)
     x_real = summarize(real).double()
-    dim = theta_post.shape[1]
+    dim, features = theta_post.shape[1], x_real.shape[1]
     posterior_covariance = torch.atleast_2d(torch.cov(theta_post.T))
     theta_post = theta_post.reshape(n, num, -1)
     d_post, d_prior, residuals, baselines, residual_p, p_values = [], [], [], [], [], []
     error_covariance = torch.zeros(dim, dim, dtype=torch.float64)
+    feature_error = torch.zeros(features, dtype=torch.float64)
     for i in range(n):
         sims, reference, theta = x_post[i][ok_post[i]], x_prior[i][ok_prior[i]], theta_post[i][ok_post[i]]
         if len(sims) <= dim + 1 or len(reference) < 2:  # the draws diverged on this trajectory's actions
@@ -137,13 +149,21 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
         d_post.append(float(torch.cdist(z_sims, z_real)[:, 0].median()))
         d_prior.append(float(torch.cdist(standardised(reference, scale, keep), z_real)[:, 0].median()))
         implied, residual, gram, slopes, per_feature = implied_parameters(z_sims, theta, torch.cat([z_sims, z_real]))
-        spread = torch.linalg.pinv(torch.atleast_2d(torch.cov(implied[:-1].T)))
-        centred = implied - implied[:-1].mean(0)
-        mahalanobis = ((centred @ spread) * centred).sum(1)
         residuals.append(float(residual[-1]))
         baselines.append(float(residual[:-1].median()))
         residual_p.append(rank_p_value(residual[:-1], residual[-1]))
         if residual_p[-1] <= alpha:
+            # standardised() divided feature f by scale_f sqrt(kept): its variance, back in the summaries' units
+            to_units = (scale[keep] * math.sqrt(int(keep.sum()))) ** 2
+            feature_error[keep] += unexplained_features(per_feature, alpha) * to_units / n
+        if noise is not None:  # the implied parameters and their excess, of replays with the modelled error
+            z_sims = standardised(x_noisy[i][ok_post[i]], scale, keep)
+            implied, residual, gram, slopes, per_feature = implied_parameters(z_sims, theta,
+                                                                              torch.cat([z_sims, z_real]))
+        spread = torch.linalg.pinv(torch.atleast_2d(torch.cov(implied[:-1].T)))
+        centred = implied - implied[:-1].mean(0)
+        mahalanobis = ((centred @ spread) * centred).sum(1)
+        if rank_p_value(residual[:-1], residual[-1]) <= alpha:
             # per feature, the real residual's square beyond the replays' median square: the parameter covariance
             # of least squares with that error in each feature (the sandwich G^-1 B^T diag(v) B G^-1)
             excess = (per_feature[-1] ** 2 - per_feature[:-1].pow(2).median(0).values).clamp_min(0.0)
@@ -153,7 +173,22 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
     states_post = post.states.double().cpu().reshape(n, num, *post.states.shape[1:])
     states_prior = pri.states.double().cpu().reshape(n, num, *pri.states.shape[1:])
     return ReplayCheck(d_post, d_prior, residuals, baselines, residual_p, p_values, alpha, max_distance_ratio, real,
-                       states_post, states_prior, posterior_covariance, error_covariance)
+                       states_post, states_prior, posterior_covariance, error_covariance, feature_error)
+
+
+_CHI2_1_MEDIAN = 0.45493642311957283  # of chi^2 with one degree of freedom
+
+
+def unexplained_features(per_feature: torch.Tensor, alpha: float) -> torch.Tensor:
+    """per_feature [m + 1, F]: the replays' residuals feature by feature, the real summary's last. The real
+    residual's square in each feature where it lies beyond every replay's and beyond chi^2_1's 1 - alpha / F
+    quantile on the replays' scale (their median square over chi^2_1's median); 0 elsewhere."""
+    replays, real = per_feature[:-1].pow(2), per_feature[-1].pow(2)
+    features = per_feature.shape[1]
+    bound = float(torch.special.ndtri(torch.tensor(1 - alpha / (2 * features), dtype=torch.float64))) ** 2
+    scale = replays.median(0).values / _CHI2_1_MEDIAN
+    beyond = (real > replays.max(0).values) & (real > bound * scale)
+    return torch.where(beyond, real, torch.zeros_like(real))
 
 
 def rank_p_value(replays: torch.Tensor, real: torch.Tensor) -> float:

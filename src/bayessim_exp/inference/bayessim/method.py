@@ -46,6 +46,8 @@ from .proposals import ProposalInputs, proposal_named
 from .replay_tempering import temper_to_replays
 from .set_calibration import set_importance_draws, simulated_sets_temperature
 from .simulate import predictive_summaries, simulate_as_driven, without_noise
+from .summary_error import MODES as SUMMARY_ERRORS
+from .summary_error import SummaryError
 from .training_data import exact_training_rows, held_out_count, split, summarized
 
 log = logging.getLogger(__name__)
@@ -63,6 +65,7 @@ class BayesSimConfig:
     escape: str  # where a round whose real data lie outside its simulations proposes the next (escape.py)
     importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
     integrators: Any  # auto or a list: the integrators inputs.sims alternate between (components.build_method)
+    summary_error: str  # replays | none: noise on simulated summaries where the replays leave features unexplained
 
     def validate(self) -> None:
         if self.parameter_space not in PARAMETER_SPACES:
@@ -77,6 +80,8 @@ class BayesSimConfig:
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
         check_integrators(self.integrators)
+        if self.summary_error not in SUMMARY_ERRORS:
+            raise ConfigError(f"summary_error={self.summary_error!r} not allowed; allowed: {', '.join(SUMMARY_ERRORS)}")
         if self.importance_draws < 1000:
             raise ConfigError(f"importance_draws must be >= 1000 (the importance-sampled posterior's base draws), "
                               f"got {self.importance_draws}")
@@ -164,7 +169,7 @@ class BayesSim(InferenceMethod):
 
     def fit(self, ctx: RoundContext) -> dict:
         r = ctx.round
-        data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
+        data = [self._training_split(ctx, k) for k in self._fitted_rounds(ctx)]
         theta, x = self._fitted_space(torch.cat([d[0] for d in data])), torch.cat([d[1] for d in data])
         model = self.inputs.model()
         if r > 1 and self.cfg.finetune:
@@ -209,6 +214,26 @@ class BayesSim(InferenceMethod):
     def _split(self, summary: dict) -> tuple[torch.Tensor, ...]:
         return split(summary, self.inputs.rc.diagnostics.held_out_fraction)
 
+    def _training_split(self, ctx: RoundContext, k: int) -> tuple[torch.Tensor, ...]:
+        """Round k's simulations split as the model of round ctx.round is trained and checked on them: their
+        summaries with this round's error model's noise (`_summary_error`), drawn in a stream of (round, k)."""
+        summary = ctx.output("summarize", k)
+        x = self._with_error(ctx, summary["x"], stage_seed(ctx.run_seed, ctx.round, f"summary_error_{k}"))
+        return self._split({**summary, "x": x})
+
+    def _summary_error(self, ctx: RoundContext) -> SummaryError | None:
+        """The error model of round ctx.round's simulated summaries (summary_error.py): the features the previous
+        round's replays left unexplained, with their variances; None in round 1, with method.summary_error=none or
+        where nothing was left unexplained."""
+        if self.cfg.summary_error == "none" or ctx.round == 1:
+            return None
+        return SummaryError.from_variance(ctx.output("condition", ctx.round - 1).get("feature_error"))
+
+    def _with_error(self, ctx: RoundContext, x: torch.Tensor, seed: int) -> torch.Tensor:
+        """Simulated summaries x with the round's error model's noise (the same x without one)."""
+        error = self._summary_error(ctx)
+        return x if error is None else error.add(x, torch.Generator().manual_seed(seed))
+
     def _fitted_model(self, ctx: RoundContext):
         model = self.inputs.model()
         model.load_state_dict(ctx.output("fit")["model"])
@@ -239,18 +264,20 @@ class BayesSim(InferenceMethod):
             log.info("round %d: replayed predictive check skipped: task %s cannot restart from an observation",
                      ctx.round, self.inputs.task.name)
         out = {"x_real": x_real, "temperature": 1.0, "replay_check": None, "unwidened_replay_check": None,
-               "tempering": None, "product_temperature": product_record}
+               "tempering": None, "product_temperature": product_record, "feature_error": None}
         if not replayable:
             out["posterior"] = condition_at(1.0)
         else:
             def check(posterior):
                 return replayed_check(lambda theta, which: replay(self.inputs.sims, theta, real, which), real, posterior,
                                       self.inputs.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
-                                      alpha=d.mismatch_alpha, max_distance_ratio=d.mismatch_distance_ratio)
+                                      alpha=d.mismatch_alpha, max_distance_ratio=d.mismatch_distance_ratio,
+                                      noise=self._summary_error(ctx))
 
             out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
                 condition_at, check, torch.diag(self.inputs.prior.stddev.double() ** 2), widen=self.cfg.replay_tempering)
             out["replay_check"], out["unwidened_replay_check"] = result.record(), first.record()
+            out["feature_error"] = first.feature_error  # the next round's error model (_summary_error)
             ctx.tb.replays(ctx.round, result, list(self.inputs.task.obs_names))
         out["dispersion"] = None if spreads[-1] is None else spreads[-1].record()
         out["temperature"] *= product_tau
@@ -283,8 +310,11 @@ class BayesSim(InferenceMethod):
                                 self.probit, draws, warn=False)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-        return simulate_as_driven(self.inputs.sims, self.inputs.policy(seed, ctx), theta, self.inputs.rc.collect.horizon,
-                                  seed, self._summaries)
+        """simulate_as_driven at theta, its summaries with the round's error model's noise (the real data are a
+        simulation plus that error)."""
+        kept, x = simulate_as_driven(self.inputs.sims, self.inputs.policy(seed, ctx), theta,
+                                     self.inputs.rc.collect.horizon, seed, self._summaries)
+        return kept, self._with_error(ctx, x, seed)
 
     def _summaries(self, traj: Trajectories) -> torch.Tensor:
         return self.inputs.summarizer(traj.to(self.inputs.device)).cpu()
@@ -296,7 +326,7 @@ class BayesSim(InferenceMethod):
         know the real data: do they lie among its training simulations, is it calibrated there (the guard reads
         `extrapolation` and `local_coverage`)?"""
         d, conditioned = self.inputs.rc.diagnostics, ctx.output("condition")
-        _, x_train, _, x_held = self._split(ctx.output("summarize"))
+        _, x_train, _, x_held = self._training_split(ctx, ctx.round)
         outside = summaries_outside(conditioned["x_real"], x_train, x_held)
         return {"predictive_distance": self._predictive(ctx, conditioned["posterior"], conditioned["x_real"]),
                 "mismatch": mismatch_report(ctx.round, outside, conditioned["unwidened_replay_check"],
@@ -308,7 +338,7 @@ class BayesSim(InferenceMethod):
         """model_checks.extrapolation on the rounds the model is trained on (None without held-out simulations or
         with `diagnostics.extrapolation_alpha` 0)."""
         alpha = self.inputs.rc.diagnostics.extrapolation_alpha
-        data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
+        data = [self._training_split(ctx, k) for k in self._fitted_rounds(ctx)]
         if alpha == 0 or len(data[-1][3]) == 0:
             return None
         return extrapolation(self._fitted_model(ctx), data, self._fitted_space, x_real, alpha, ctx.seed)
@@ -408,7 +438,7 @@ class BayesSim(InferenceMethod):
     def _read(self, ctx: RoundContext, escape: str) -> dict:
         """escape.read_at (the `escape` read) on the rounds the model is trained on: their training rows fitted,
         the round's held-out rows checked, read at the real summaries, in the model's coordinates."""
-        data = [self._split(ctx.output("summarize", k)) for k in self._fitted_rounds(ctx)]
+        data = [self._training_split(ctx, k) for k in self._fitted_rounds(ctx)]
         mean, cov = read_at(torch.cat([d[1] for d in data]), self._fitted_space(torch.cat([d[0] for d in data])),
                             data[-1][3], self._fitted_space(data[-1][2]),
                             ctx.output("condition")["x_real"].reshape(-1, data[-1][3].shape[-1]),
@@ -458,6 +488,7 @@ class BayesSim(InferenceMethod):
             "temperature": conditioned["temperature"],
             "product_temperature": conditioned["product_temperature"],
             "replay_check": conditioned["replay_check"],
+            "summary_error": None if (error := self._summary_error(ctx)) is None else error.record(),
             **{k: v for k, v in ctx.output("model_check").items() if k != "seconds"},
         }
 

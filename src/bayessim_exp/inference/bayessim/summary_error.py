@@ -1,0 +1,46 @@
+"""A summary error model: features the simulator cannot reproduce near the posterior, and noise that teaches q so.
+
+A real system differs from the simulator in a few summary features (a sensor's offset, friction the model lacks
+showing in the late steps) as often as in all of them. The replays' tempering (replay_tempering.py) widens the
+posterior in every direction until those features' implied parameters fit inside it: a bias in two features of
+eighty cost most of the information on benchmarks/summary_bias.py. The error model instead reads, feature by
+feature, what the replays of round r's posterior leave unexplained in the real summaries
+(diagnostics/replayed_check.py: `feature_error`, a variance per feature where the real residual lies beyond every
+replay's and beyond a Bonferroni bound on their scale), and round r + 1 adds Gaussian noise of those variances to
+every simulated summary its model is trained and checked on (robust NPE's noise model, Gaussian, with the
+variances read from the replays rather than learned): q then learns how little those features say, the
+product's temperature and the replays' widening see the same noise, and the features the simulator does
+reproduce keep their weight. docs/statistics.md has the measurements.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+MODES = ("replays", "none")
+
+
+@dataclasses.dataclass
+class SummaryError:
+    """Per-feature standard deviations [F] of the noise added to simulated summaries (0 where none)."""
+
+    std: torch.Tensor
+
+    @classmethod
+    def from_variance(cls, variance: torch.Tensor | None) -> SummaryError | None:
+        """The error model of a check's `feature_error` variances, or None where every one is 0 (or no check)."""
+        if variance is None or not bool((variance > 0).any()):
+            return None
+        return cls(variance.double().sqrt())
+
+    def add(self, x: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+        """x [..., F] with independent noise of `std` in each feature, drawn from `generator` (on the CPU)."""
+        noise = torch.randn(x.shape, generator=generator, dtype=torch.float64) * self.std
+        return x + noise.to(x.device, x.dtype)
+
+    def record(self) -> dict:
+        """What results.json keeps: the features with noise and its standard deviations."""
+        features = torch.nonzero(self.std > 0).flatten()
+        return {"features": features.tolist(), "std": self.std[features].tolist()}

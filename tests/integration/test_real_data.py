@@ -169,3 +169,20 @@ def test_a_sensor_glitch_in_two_readings_keeps_the_truth_and_most_of_the_informa
         assert {3 * step + 2 for step in steps} <= set(run["rounds"][-1]["summary_error"]["features"])
     assert sum(level < 0.9 for level in levels) >= 3, levels
     assert float(np.median(gains)) >= 6.0, gains
+
+
+if __name__ == "__main__":  # the glitch test's runs with other offsets or settings, e.g. method.summary_error=none
+    import argparse
+    import json
+    import tempfile
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description="glitched_runs: each run's truth level and gain at the truth")
+    ap.add_argument("--offset", type=float, default=0.2)
+    ap.add_argument("overrides", nargs="*")
+    args = ap.parse_args()
+    for run in glitched_runs(Path(tempfile.mkdtemp(prefix="glitch_")), args.offset, args.overrides):
+        last = run["rounds"][-1]
+        print(json.dumps({"offset": args.offset, "overrides": args.overrides, "level": last["truth"]["hpd_level"],
+                          "gain": last["log_prob_gain"], "summary_error": last["summary_error"],
+                          "temperatures": [r["temperature"] for r in run["rounds"]]}), flush=True)

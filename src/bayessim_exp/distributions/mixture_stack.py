@@ -27,8 +27,7 @@ _LOG_2PI = math.log(2 * math.pi)
 # doubles the draws and densities of one chunk of members hold at once: a few members at a time on a CPU, whose
 # caches a larger chunk outgrows (at ShadowHand's size, 20 members at once took 2.5 to 3.6 times as long as 2 at a
 # time on the 2-core development machine), and every member on a GPU, where one operation over them all saves the time
-_CHUNK_ELEMENTS = {"cpu": 2**20}
-_GPU_CHUNK_ELEMENTS = 2**26
+_CHUNK_ELEMENTS_CPU, _CHUNK_ELEMENTS_GPU = 2**20, 2**26
 
 
 class MixtureStack:
@@ -90,9 +89,10 @@ class MixtureStack:
 
     def to(self, device: torch.device | str) -> MixtureStack:
         """The stack with its mixtures' tensors on `device` (the transform stays on the CPU)."""
-        out = copy.copy(self)
-        for name in ("log_weights", "means", "covs", "scale_tril"):
-            setattr(out, name, getattr(self, name).to(device))
+        out = type(self).__new__(type(self))
+        out.log_weights, out.means, out.covs, out.scale_tril = (
+            t.to(device) for t in (self.log_weights, self.means, self.covs, self.scale_tril))
+        out.transform = self.transform
         return out
 
     def noise(self, member: int, count: int, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
@@ -137,7 +137,7 @@ class MixtureStack:
     def _chunks(self, per_member: int, *tensors: torch.Tensor):
         """(slice, *tensors[slice]) over the members, in chunks of at most the device's budget of `per_member` x D
         doubles each."""
-        budget = _CHUNK_ELEMENTS.get(self.means.device.type, _GPU_CHUNK_ELEMENTS)
+        budget = _CHUNK_ELEMENTS_CPU if self.means.device.type == "cpu" else _CHUNK_ELEMENTS_GPU
         step = max(1, budget // (per_member * self.dim))
         for start in range(0, len(self), step):
             s = slice(start, start + step)

@@ -66,10 +66,11 @@ class ProbitTransform:
 
         return float((c_high - c_low).prod()), sample
 
-    def log_abs_det_jacobian(self, theta: torch.Tensor) -> torch.Tensor:
-        """log |du/dtheta| = sum_d log p_d(theta_d) - log phi(u_d): [...]."""
+    def log_abs_det_jacobian(self, theta: torch.Tensor, u: torch.Tensor | None = None) -> torch.Tensor:
+        """log |du/dtheta| = sum_d log p_d(theta_d) - log phi(u_d): [...]; u: to_probit(theta), where the caller
+        has it already."""
         theta = theta.double().clamp(self.low, self.high)
-        return (self.prior.log_marginal(theta) - std_normal_log_pdf(self.to_probit(theta))).sum(-1)
+        return (self.prior.log_marginal(theta) - std_normal_log_pdf(self.to_probit(theta) if u is None else u)).sum(-1)
 
 
 def standard_normal_prior(dim: int) -> GaussianPrior:

@@ -15,10 +15,11 @@ from collections.abc import Callable
 import torch
 
 from ...distributions.base import ParameterDistribution
+from ...distributions.mixture_stack import MixtureStack
 from ...distributions.probit import ProbitPosterior, ProbitTransform, standard_normal_prior
 from ...models.base import PosteriorModel
 from .combination import Dispersion, combine
-from .correction import IMPORTANCE_DRAWS, MAX_COMPONENTS, needs_no_correction, tempered_posterior
+from .correction import IMPORTANCE_DRAWS, MAX_COMPONENTS, needs_no_correction, tempered_posterior, tempered_posteriors
 
 
 def condition(model: PosteriorModel, x_obs: torch.Tensor, prior, max_components: int = MAX_COMPONENTS, proposal=None,
@@ -56,6 +57,28 @@ def tempered_product(conditionals: list, prior, max_components: int = MAX_COMPON
     at = tempered_posterior(conditionals, standard_normal_prior(probit.dim), _probit_proposal(proposal, prior),
                             max_components=max_components, seed=seed, importance_draws=importance_draws, warn=warn)
     return lambda temperature: ProbitPosterior(at(temperature), probit)
+
+
+def tempered_products(sets: list[list], prior, max_components: int = MAX_COMPONENTS, proposal=None, seed: int = 0,
+                      probit: ProbitTransform | None = None, importance_draws: int = IMPORTANCE_DRAWS,
+                      device: torch.device | str = "cpu"
+                      ) -> Callable[[float], MixtureStack | list[ParameterDistribution]]:
+    """`tempered_product` (warn=False) of each of many sets of per-trajectory posteriors, as a function of the
+    temperature: correction.py's tempered_posteriors, their MixtureStack (on `device`) where every set's is in closed
+    form, else the list of each set's posterior."""
+    if probit is None:
+        return tempered_posteriors(sets, prior, proposal, max_components=max_components, seed=seed,
+                                   importance_draws=importance_draws, device=device)
+    at = tempered_posteriors(sets, standard_normal_prior(probit.dim), _probit_proposal(proposal, prior),
+                             max_components=max_components, seed=seed, importance_draws=importance_draws, device=device)
+
+    def mapped(temperature: float) -> MixtureStack | list[ParameterDistribution]:
+        posteriors = at(temperature)
+        if isinstance(posteriors, MixtureStack):
+            return posteriors.mapped(probit)
+        return [ProbitPosterior(p, probit) for p in posteriors]
+
+    return mapped
 
 
 def _probit_proposal(proposal, prior):

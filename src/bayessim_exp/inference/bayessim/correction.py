@@ -30,6 +30,7 @@ from ...data_files import data_class
 from ...distributions.base import NOT_GAUSSIAN, ParameterDistribution
 from ...distributions.importance import DefensiveMixture, ImportancePosterior
 from ...distributions.mixture import GaussianMixture, NotPositiveDefinite, TruncatedMixture
+from ...distributions.mixture_stack import MixtureStack
 from ...distributions.restricted import Restricted
 from ...stages import info_once_per_round
 
@@ -82,24 +83,42 @@ def _natural(mean: torch.Tensor, cov: torch.Tensor) -> tuple[torch.Tensor, torch
 
 
 def _apply_gaussian_ratio(mix: GaussianMixture, lam: torch.Tensor, eta: torch.Tensor) -> GaussianMixture | None:
-    """mix(theta) * exp(-theta^T lam theta / 2 + eta^T theta), renormalised; None if a precision is not PD.
+    """mix(theta) * exp(-theta^T lam theta / 2 + eta^T theta), renormalised; None if a precision is not PD."""
+    logdet_s = 2 * torch.log(torch.diagonal(mix.scale_tril, dim1=-2, dim2=-1)).sum(-1)
+    logits, means, covs, ok = _gaussian_ratio(mix.log_weights, mix.means, torch.cholesky_inverse(mix.scale_tril),
+                                              logdet_s, lam, eta)
+    return GaussianMixture(logits, means, covs) if bool(ok) else None
+
+
+def _gaussian_ratio(log_weights: torch.Tensor, means: torch.Tensor, s_inv: torch.Tensor, logdet_s: torch.Tensor,
+                    lam: torch.Tensor, eta: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """(logits, means, covs, ok) of `_apply_gaussian_ratio` from a mixture's log weights [..., K], means, inverse
+    covariances S_k^-1 and their log determinants, of one mixture or a stack of them; ok [...]: whether every
+    component's precision is positive definite (the mixture's other entries mean nothing where not).
 
     Component k gets precision P_k = S_k^-1 + lam and weight w_k * integral of the product:
     log c_k = -1/2 log|S_k| - 1/2 log|P_k| - 1/2 m_k^T S_k^-1 m_k + 1/2 e_k^T P_k^-1 e_k, e_k = S_k^-1 m_k + eta.
     """
-    s_inv = torch.cholesky_inverse(mix.scale_tril)
+    lam, eta = lam.to(means.device), eta.to(means.device)
     prec = s_inv + lam
     chol, info = torch.linalg.cholesky_ex(0.5 * (prec + prec.transpose(-1, -2)))
-    if (info != 0).any():
-        return None
-    e = (s_inv @ mix.means.unsqueeze(-1)).squeeze(-1) + eta
+    s_inv_m = (s_inv @ means.unsqueeze(-1)).squeeze(-1)
+    e = s_inv_m + eta
     new_means = torch.cholesky_solve(e.unsqueeze(-1), chol).squeeze(-1)
-    logdet_s = 2 * torch.log(torch.diagonal(mix.scale_tril, dim1=-2, dim2=-1)).sum(-1)
     logdet_p = 2 * torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
-    quad_m = (mix.means * (s_inv @ mix.means.unsqueeze(-1)).squeeze(-1)).sum(-1)
-    quad_e = (e * new_means).sum(-1)
-    log_c = -0.5 * logdet_s - 0.5 * logdet_p - 0.5 * quad_m + 0.5 * quad_e
-    return GaussianMixture(mix.log_weights + log_c, new_means, torch.cholesky_inverse(chol))
+    log_c = -0.5 * logdet_s - 0.5 * logdet_p - 0.5 * (means * s_inv_m).sum(-1) + 0.5 * (e * new_means).sum(-1)
+    return log_weights + log_c, new_means, torch.cholesky_inverse(chol), (info == 0).all(-1)
+
+
+def _stack_closed_form(stack: MixtureStack, tau: float, lam, eta) -> tuple[torch.Tensor, ...]:
+    """(logits, means, covs, ok) of `_closed_form` for every product of a stack. The tempered components'
+    precisions are tau times the product's, computed once for every temperature, not refactorised at each
+    (the same to rounding)."""
+    logits = tau * stack.log_weights + 0.5 * (1 - tau) * stack.log_dets
+    if lam is None:
+        return logits, stack.means, stack.covs / tau, torch.ones(len(stack), dtype=torch.bool)
+    return _gaussian_ratio(torch.log_softmax(logits, -1), stack.means, tau * stack.precisions,
+                           stack.log_dets - stack.dim * math.log(tau), lam, eta)
 
 
 def moments(dist, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
@@ -169,28 +188,13 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
     call that needs it. warn=False logs an importance-sampled result at debug level (simulated sets: a
     thousand of them a round)."""
     n = len(conditionals)
-    if n == 0:
-        raise ValueError("posterior needs at least one real summary")
-    proposals = list(proposal) if isinstance(proposal, (list, tuple)) else [proposal] * n
-    if len(proposals) != n:
-        raise ValueError(f"{len(proposals)} proposals for {n} real summaries")
-    corrected = [p for p in proposals if not needs_no_correction(p, prior)]
-    for p in corrected:
-        _check_covers(prior, p)
+    corrected = _corrected(n, prior, proposal)
     box = _box(prior)
     prior_factor = _gaussian_factor(prior)
 
     @functools.cache
     def product(narrowed: bool) -> GaussianMixture | None:
-        # a component wider than a Gaussian prior is a fitting artefact (no posterior of a Gaussian prior is);
-        # dividing by the prior then leaves a negative precision, and far wider ones (a model far outside its
-        # training summaries: variances of 1e14) leave products double precision cannot factorise (None):
-        # `narrowed` clamps them to the prior's
-        try:
-            factors = [_no_wider_than(q, prior_factor[1]) for q in conditionals] if narrowed else conditionals
-            return _product(factors, max_components)
-        except NotPositiveDefinite:
-            return None
+        return _set_product(conditionals, prior_factor, narrowed, max_components)
 
     @functools.cache
     def moment_product() -> GaussianMixture:
@@ -203,9 +207,7 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
             return _side_by_side(gaussians)
 
     def at(temperature: float):
-        if not 0.0 < temperature <= 1.0:
-            raise ValueError(f"temperature must be in (0, 1], got {temperature}")
-        tau = float(temperature)
+        tau = _checked(temperature)
         prior_power = 1 - tau * (n - len(corrected))  # p * prod over uncorrected factors of (1/p)^tau
         reason = _closed_form_obstacle(conditionals, prior, prior_power, corrected)
         if reason is None:
@@ -214,8 +216,7 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
             if result is None and isinstance(prior_factor, tuple):
                 result = _closed_form(product(True), tau, lam, eta)
                 if result is not None:
-                    info_once_per_round(log, "posterior: components wider than the prior narrowed to it, keeping "
-                                                  "the closed form")
+                    info_once_per_round(log, _NARROWED)
             if result is not None:
                 return result if box is None else TruncatedMixture(result, *box, seed=seed)
             reason = "the product or a component's corrected precision is not positive definite"
@@ -232,6 +233,106 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
         return result
 
     return at
+
+
+def tempered_posteriors(sets: Sequence[Sequence], prior, proposal=None, *, max_components: int = MAX_COMPONENTS,
+                        seed: int = 0, importance_draws: int = IMPORTANCE_DRAWS, device: torch.device | str = "cpu"
+                        ) -> Callable[[float], MixtureStack | list[ParameterDistribution]]:
+    """`tempered_posterior` (warn=False) of each of many sets of as many conditionals (the simulated sets that
+    set_calibration.py fits the temperature on), as a function of the temperature. Where every set's posterior is
+    a Gaussian mixture over R^D in closed form (no box to truncate it to: probit space), their MixtureStack on
+    `device`, tempered and corrected for all sets at once by the same formulas; at a temperature where one is not,
+    the list of each set's posterior."""
+    singles = [tempered_posterior(c, prior, proposal, max_components=max_components, seed=seed,
+                                  importance_draws=importance_draws, warn=False) for c in sets]
+    n = len(sets[0])
+    corrected = _corrected(n, prior, proposal)
+    prior_factor = _gaussian_factor(prior)
+    mixtures = _box(prior) is None and all(_as_mixture(q) is not None for c in sets for q in c)
+
+    @functools.cache
+    def product(i: int, narrowed: bool) -> GaussianMixture | None:
+        return _set_product(sets[i], prior_factor, narrowed, max_components)
+
+    @functools.cache
+    def stack_of(which: tuple[int, ...], narrowed: bool) -> MixtureStack | None:
+        stack = MixtureStack.of([product(i, narrowed) for i in which])
+        return None if stack is None else stack.to(device)
+
+    def stacked(tau: float) -> MixtureStack | None:
+        """`tempered_posterior`'s closed form for every set, from the narrowed product where the plain one has
+        none; None where a set has neither (or the products' sizes differ)."""
+        prior_power = 1 - tau * (n - len(corrected))
+        if not mixtures or _closed_form_obstacle(sets[0], prior, prior_power, corrected) is not None:
+            return None
+        lam, eta = _ratio_natural(prior, prior_power, corrected, sets[0][0].dim, tau)
+        parts, todo = None, list(range(len(sets)))
+        for narrowed in (False, True) if isinstance(prior_factor, tuple) else (False,):
+            which = [i for i in todo if product(i, narrowed) is not None]
+            stack = stack_of(tuple(which), narrowed) if which else None
+            if stack is None:
+                if which:
+                    return None
+                continue
+            logits, means, covs, ok = _stack_closed_form(stack, tau, lam, eta)
+            ok = ok.cpu()
+            if len(which) == len(sets) and ok.all():
+                return MixtureStack(logits, means, covs)
+            if parts is None:
+                parts = [t.new_zeros(len(sets), *t.shape[1:]) for t in (logits, means, covs)]
+            if parts[2].shape[1:] != covs.shape[1:]:
+                return None
+            rows = torch.tensor(which, dtype=torch.long)[ok]
+            for part, values in zip(parts, (logits, means, covs)):
+                part[rows.to(part.device)] = values[ok.to(values.device)]
+            placed = set(rows.tolist())
+            todo = [i for i in todo if i not in placed]
+            if narrowed and len(rows):
+                info_once_per_round(log, _NARROWED)
+        return None if todo else MixtureStack(*parts)
+
+    def at(temperature: float) -> MixtureStack | list[ParameterDistribution]:
+        tau = _checked(temperature)
+        stack = stacked(tau)
+        return [single(tau) for single in singles] if stack is None else stack
+
+    return at
+
+
+_NARROWED = "posterior: components wider than the prior narrowed to it, keeping the closed form"
+
+
+def _checked(temperature: float) -> float:
+    if not 0.0 < temperature <= 1.0:
+        raise ValueError(f"temperature must be in (0, 1], got {temperature}")
+    return float(temperature)
+
+
+def _corrected(n: int, prior, proposal) -> list:
+    """The proposals, one per conditional, that the product divides by (those that are not the prior or a
+    restriction of it), checked to cover the prior."""
+    if n == 0:
+        raise ValueError("posterior needs at least one real summary")
+    proposals = list(proposal) if isinstance(proposal, (list, tuple)) else [proposal] * n
+    if len(proposals) != n:
+        raise ValueError(f"{len(proposals)} proposals for {n} real summaries")
+    corrected = [p for p in proposals if not needs_no_correction(p, prior)]
+    for p in corrected:
+        _check_covers(prior, p)
+    return corrected
+
+
+def _set_product(conditionals: Sequence, prior_factor, narrowed: bool, max_components: int) -> GaussianMixture | None:
+    """The conditionals' product; None where double precision cannot factorise it.
+
+    A component wider than a Gaussian prior is a fitting artefact (no posterior of a Gaussian prior is); dividing
+    by the prior then leaves a negative precision, and far wider ones (a model far outside its training summaries:
+    variances of 1e14) leave products double precision cannot factorise: `narrowed` clamps them to the prior's."""
+    try:
+        factors = [_no_wider_than(q, prior_factor[1]) for q in conditionals] if narrowed else conditionals
+        return _product(factors, max_components)
+    except NotPositiveDefinite:
+        return None
 
 
 def _closed_form(product: GaussianMixture | None, tau: float, lam, eta) -> GaussianMixture | None:

@@ -36,7 +36,7 @@ from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, MethodInputs, handed_on_name, real_trajectories
 from .combination import COMBINATIONS
-from .condition import condition, tempered_product
+from .condition import condition, tempered_product, tempered_products
 from .escape import ESCAPES, READS, read_at
 from .handed_on import ProposalSource, handed_on, handed_on_round, posterior_of, proposal_source
 from .identifiability_checks import log_findings, nominal_point, summaries_at
@@ -44,7 +44,7 @@ from .model_checks import coverage_near_real, extrapolation
 from .parameter_space import PARAMETER_SPACES, probit_transform
 from .proposals import ProposalInputs, proposal_named
 from .replay_tempering import temper_to_replays
-from .set_calibration import set_importance_draws, simulated_sets_temperature
+from .set_calibration import SetPosteriors, set_importance_draws, simulated_sets_temperature
 from .simulate import predictive_summaries, simulate_as_driven, without_noise
 from .summary_error import MODES as SUMMARY_ERRORS
 from .summary_error import SummaryError
@@ -294,7 +294,8 @@ class BayesSim(InferenceMethod):
         seed = stage_seed(ctx.run_seed, ctx.round, "product_temperature")  # its own stream, as the checks'
         tau, record = simulated_sets_temperature(
             theta, n, lambda theta_sets: self._simulate(ctx, theta_sets, seed),
-            lambda x_set: self._simulated_set_product(ctx, [model.conditional(x_i.float()) for x_i in x_set]),
+            lambda x: self._simulated_set_products(ctx, [[model.conditional(x_i.float()) for x_i in x_set]
+                                                         for x_set in x]),
             d.levels, d.coverage_samples, seed)
         if tau < 1:
             log.info("round %d: products of %d trajectories widened to temperature %.3g (fitted on %d simulated sets)",
@@ -308,6 +309,13 @@ class BayesSim(InferenceMethod):
         draws = set_importance_draws(self.cfg.importance_draws, self.inputs.rc.diagnostics.coverage_samples)
         return tempered_product(conditionals, self.inputs.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
                                 self.probit, draws, warn=False)
+
+    def _simulated_set_products(self, ctx: RoundContext, sets: list[list]) -> Callable[[float], SetPosteriors]:
+        """`_simulated_set_product` of many sets at once (condition.tempered_products): where every set's posterior
+        is in closed form, their MixtureStack on the run's device, read together by set_calibration.py."""
+        draws = set_importance_draws(self.cfg.importance_draws, self.inputs.rc.diagnostics.coverage_samples)
+        return tempered_products(sets, self.inputs.prior, self.cfg.max_components, self.proposal(ctx), ctx.seed,
+                                 self.probit, draws, self.inputs.device)
 
     def _simulate(self, ctx: RoundContext, theta: torch.Tensor, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
         """simulate_as_driven at theta, its summaries with the round's error model's noise (the real data are a

@@ -26,7 +26,8 @@ from collections.abc import Callable, Sequence
 import torch
 
 from ...distributions.base import ParameterDistribution
-from ...distributions.hpd import own_level, shares_inside
+from ...distributions.hpd import own_levels, shares_inside
+from ...distributions.mixture_stack import MixtureStack
 
 COARSE = tuple(2.0 ** (-k / 2) for k in range(9))  # 1 down to 1/16 in steps of sqrt(2)
 _FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the best coarse one
@@ -34,6 +35,8 @@ _FINE_STEPS = (-3, -2, -1, 1, 2, 3)  # then eighths of a doubling around the bes
 # only has to give the `draws` that locate the set's own parameters, so it is this many times `draws` (a pool of
 # method.importance_draws for each of some thousand sets and temperatures was most of a round's time: docs/benchmarks.md).
 POOL_PER_DRAW = 20
+# the sets' posteriors at one temperature: a MixtureStack, read all at once, or one posterior per set
+SetPosteriors = MixtureStack | list[ParameterDistribution]
 
 
 def set_importance_draws(importance_draws: int, draws: int) -> int:
@@ -76,21 +79,20 @@ def product_temperature(levels_at: Callable[[float], torch.Tensor], levels: Sequ
 
 def simulated_sets_temperature(theta: torch.Tensor, n: int,
                                simulate: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
-                               product_of: Callable[[torch.Tensor], Callable[[float], ParameterDistribution]],
+                               products_of: Callable[[torch.Tensor], Callable[[float], SetPosteriors]],
                                levels: Sequence[float], draws: int, seed: int) -> tuple[float, dict]:
     """`product_temperature` fitted on one set of n simulations at each of theta [K, D] (the round's held-out
     parameters), sets with a failed simulation left out. simulate(theta [M, D]) -> (kept [M], summaries [M, F])
-    driven as the real data were; product_of(summaries [n, F]) -> the set's product posterior as a function of
+    driven as the real data were; products_of(summaries [K', n, F]) -> the sets' product posteriors as a function of
     the temperature; `draws` per set locate its own parameters' HPD level."""
     count = len(theta)
     kept, x = simulate(theta.repeat_interleave(n, 0))
     ok = kept.reshape(count, n).all(1)
     theta, x = theta[ok], x.reshape(count, n, -1)[ok]
-    products = [product_of(x_set) for x_set in x]
+    products = products_of(x)
 
     def levels_at(temperature: float) -> torch.Tensor:
         generator = torch.Generator().manual_seed(seed)  # the same draws' stream at every temperature
-        return torch.tensor([own_level(product(temperature), t, draws, generator)
-                             for product, t in zip(products, theta)], dtype=torch.float64)
+        return own_levels(products(temperature), theta, draws, generator)
 
     return product_temperature(levels_at, levels)

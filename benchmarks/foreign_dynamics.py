@@ -129,7 +129,7 @@ def cases(args) -> list[dict]:
     out = []
     for source in args.sources:
         for k, (mass, length) in enumerate(SETTINGS[: args.settings]):
-            for n in (1, 5):
+            for n in args.trajectories:
                 out.append({"group": SOURCES[source][0], "source": source, "mass": mass, "length": length, "n": n,
                             "seed": 100 + k, "actions": "random", "overrides": overrides,
                             "dir": str(args.out / f"{source}_{mass}_{length}_n{n}")})
@@ -219,6 +219,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2, help="runs at once (one thread each)")
     ap.add_argument("--sources", nargs="+", default=list(SOURCES), choices=list(SOURCES))
     ap.add_argument("--settings", type=int, default=len(SETTINGS), help="how many of the hidden parameter settings")
+    ap.add_argument("--trajectories", type=int, nargs="+", default=[1, 5], choices=[1, 5], help="the n of the cases")
     ap.add_argument("--sine", type=int, default=3, help="sine-excitation cases (different data seeds)")
     ap.add_argument("--quick", action="store_true", help="2 rounds of 2,000 simulations (a try, not the benchmark)")
     ap.add_argument("--overrides", nargs="*", default=[], help="added to every run (e.g. policy=random)")

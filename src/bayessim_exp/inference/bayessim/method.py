@@ -334,7 +334,8 @@ class BayesSim(InferenceMethod):
         know the real data: do they lie among its training simulations, is it calibrated there (the guard reads
         `extrapolation` and `local_coverage`)?"""
         d, conditioned = self.inputs.rc.diagnostics, ctx.output("condition")
-        _, x_train, _, x_held = self._training_split(ctx, ctx.round)
+        # the simulator's own summaries, without the error model's noise: a mismatch is what it cannot reproduce
+        _, x_train, _, x_held = self._split(ctx.output("summarize"))
         outside = summaries_outside(conditioned["x_real"], x_train, x_held)
         return {"predictive_distance": self._predictive(ctx, conditioned["posterior"], conditioned["x_real"]),
                 "mismatch": mismatch_report(ctx.round, outside, conditioned["unwidened_replay_check"],

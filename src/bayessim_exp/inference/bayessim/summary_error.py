@@ -10,7 +10,8 @@ replay's and beyond a Bonferroni bound on their scale), and round r + 1 adds Gau
 every simulated summary its model is trained and checked on (robust NPE's noise model, Gaussian, with the
 variances read from the replays rather than learned): q then learns how little those features say, the
 product's temperature and the replays' widening see the same noise, and the features the simulator does
-reproduce keep their weight. docs/statistics.md has the measurements.
+reproduce keep their weight. The mismatch verdict stays on the simulations as simulated: a misread sensor is
+still a mismatch. docs/statistics.md has the measurements.
 """
 
 from __future__ import annotations

@@ -197,11 +197,12 @@ def test_data_the_simulator_reproduces_leave_no_feature_error():
     assert read <= 1
 
 
-def test_replays_with_the_modelled_error_hold_the_real_data_and_the_flag_stays_on_the_simulator():
+def test_with_an_error_model_the_check_reads_the_parameters_from_the_other_features_and_flags_on_all():
     """A posterior far narrower than an offset in two features: the real data's implied parameters lie outside
-    the replays'. With the offset's size as the error model's noise in those features, the replays hold them (and
-    no model error is left to widen for), while what the simulator alone leaves unexplained (residual, its
-    p-value, the flag, the feature error) reads the same."""
+    the replays'. With those two features in the error model, the implied parameters are read from the other four,
+    as the model trained with that noise reads them: the replays hold the real data (and no model error is left to
+    widen for), while what the simulator alone leaves unexplained (residual, its p-value, the flag, the feature
+    error) reads the same."""
     from bayessim_exp.inference.bayessim.summary_error import SummaryError
 
     A = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0], [1.0, -1.0], [0.5, 2.0]], dtype=torch.float64)

@@ -9,9 +9,10 @@ feature, what the replays of round r's posterior leave unexplained in the real s
 replay's and beyond a Bonferroni bound on their scale), and round r + 1 adds Gaussian noise of those variances to
 every simulated summary its model is trained and checked on (robust NPE's noise model, Gaussian, with the
 variances read from the replays rather than learned): q then learns how little those features say, the
-product's temperature and the replays' widening see the same noise, and the features the simulator does
-reproduce keep their weight. The mismatch verdict stays on the simulations as simulated: a misread sensor is
-still a mismatch. docs/statistics.md has the measurements.
+product's temperature sees the same noise, the replays' widening answers only what the other features leave
+unexplained (replayed_check reads the parameters from them), and the features the simulator does reproduce
+keep their weight. The mismatch verdict stays on the simulations as simulated: a misread sensor is still a
+mismatch. docs/statistics.md has the measurements.
 """
 
 from __future__ import annotations

@@ -23,6 +23,7 @@ def test_the_noise_has_the_read_variance_in_its_features_and_none_elsewhere():
     assert torch.equal(noisy[:, [0, 2]], x[:, [0, 2]])
     torch.testing.assert_close(noisy[:, [1, 3]].double().std(0), torch.tensor([2.0, 0.5], dtype=torch.float64),
                                rtol=0.01, atol=0)
+    assert error.modelled.tolist() == [False, True, False, True]
     assert error.record() == {"features": [1, 3], "std": [2.0, 0.5]}
 
 

@@ -34,12 +34,11 @@ variance; docs/statistics.md has what each kept on the foreign-dynamics benchmar
 The same excess read as a summary error model (inference/bayessim/summary_error.py): `feature_error`, per
 feature in the summaries' own units, the real residual's square where it lies beyond every replay's and beyond
 a Bonferroni bound (alpha over the features) on the replays' scale there (their median square over chi^2_1's
-median), averaged over the real trajectories; 0 elsewhere. With a `noise` error model the implied parameters,
-their p-values and `model_error_covariance` are read from the features without modelled error, as the model
-trained with that noise reads the parameters from them (replays with the noise added instead hold any real data
-whose noisy features dominate the unweighted fit: on physics the model lacks no round widened, and the
-posteriors missed the truth by tens of nats); the residuals, the flag and `feature_error` stay on all features:
-what the simulator itself leaves unexplained.
+median), averaged over the real trajectories; 0 elsewhere. With features in an error model (`modelled`) the
+implied parameters, their p-values and `model_error_covariance` are read from the other features, as the model
+trained with that noise reads the parameters from them (replays with the noise added instead held any real data
+whose noisy features dominate the unweighted fit, and physics the model lacks went unwidened: docs/statistics.md);
+the residuals, the flag and `feature_error` stay on all features: what the simulator itself leaves unexplained.
 
 Two readings (docs/statistics.md):
 - `too_narrow`: p <= alpha, the real data's implied parameters lie outside the posterior. Either the
@@ -116,10 +115,10 @@ def _excess(residual: float, baseline: float) -> float:
 
 def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories], real: Trajectories,
                    posterior, prior, *, summarize: Callable[[Trajectories], torch.Tensor], num: int, seed: int,
-                   alpha: float, max_distance_ratio: float, noise=None) -> ReplayCheck:
+                   alpha: float, max_distance_ratio: float, modelled: torch.Tensor | None = None) -> ReplayCheck:
     """simulate(params [N, D], which [N]) replays real trajectory which[k] at params[k] (replay.replay);
-    summarize(trajectories) -> [N, F], the run's summarizer; noise: the run's summary error model
-    (inference/bayessim/summary_error.py) or None."""
+    summarize(trajectories) -> [N, F], the run's summarizer; modelled [F] bool: the features the run's summary
+    error model puts noise in (inference/bayessim/summary_error.py), or None."""
     n = real.num
     which = torch.arange(n).repeat_interleave(num)
     g = torch.Generator().manual_seed(seed)  # its own stream: the check never moves the inference's draws
@@ -132,7 +131,7 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
     ok_prior = (~pri.diverged.cpu()).reshape(n, num) & torch.isfinite(x_prior).all(-1)
     x_real = summarize(real).double()
     dim, features = theta_post.shape[1], x_real.shape[1]
-    modelled = torch.zeros(features, dtype=torch.bool) if noise is None else noise.std.cpu() > 0
+    modelled = torch.zeros(features, dtype=torch.bool) if modelled is None else modelled.cpu()
     posterior_covariance = torch.atleast_2d(torch.cov(theta_post.T))
     theta_post = theta_post.reshape(n, num, -1)
     d_post, d_prior, residuals, baselines, residual_p, p_values = [], [], [], [], [], []

@@ -268,11 +268,13 @@ class BayesSim(InferenceMethod):
         if not replayable:
             out["posterior"] = condition_at(1.0)
         else:
+            error = self._summary_error(ctx)
+
             def check(posterior):
                 return replayed_check(lambda theta, which: replay(self.inputs.sims, theta, real, which), real, posterior,
                                       self.inputs.prior, summarize=self._summaries, num=d.replay_sims, seed=ctx.seed,
                                       alpha=d.mismatch_alpha, max_distance_ratio=d.mismatch_distance_ratio,
-                                      noise=self._summary_error(ctx))
+                                      modelled=None if error is None else error.modelled)
 
             out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
                 condition_at, check, torch.diag(self.inputs.prior.stddev.double() ** 2), widen=self.cfg.replay_tempering)

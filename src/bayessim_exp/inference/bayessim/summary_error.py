@@ -42,7 +42,12 @@ class SummaryError:
         noise = torch.randn(x.shape, generator=generator, dtype=torch.float64) * self.std
         return x + noise.to(x.device, x.dtype)
 
+    @property
+    def modelled(self) -> torch.Tensor:
+        """[F] bool: the features with noise."""
+        return self.std > 0
+
     def record(self) -> dict:
         """What results.json keeps: the features with noise and its standard deviations."""
-        features = torch.nonzero(self.std > 0).flatten()
+        features = torch.nonzero(self.modelled).flatten()
         return {"features": features.tolist(), "std": self.std[features].tolist()}

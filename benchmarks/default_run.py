@@ -1,7 +1,8 @@
 """Wall time of whole runs, `python -m bayessim_exp`, as a newcomer starts them: variants interleaved.
 
     python benchmarks/default_run.py [--reps 3] [--warmup 1]
-        [--variant gpu device=cuda] [--variant cpu device=cpu sim=native] [--src old=PATH] [-- OVERRIDES]
+        [--variant gpu device=cuda] [--variant cpu device=cpu sim=native] [--src old=PATH] [--profile DIR]
+        [-- OVERRIDES]
 
 Each `--variant NAME OVERRIDE...` is a set of Hydra overrides (the first is the baseline; default: one
 variant `default` with none); `--src NAME=PATH` adds, per variant, a copy run with PATH first on
@@ -10,7 +11,8 @@ compare code. OVERRIDES after `--` go to every run. Every variant runs `--warmup
 (JAX's, MuJoCo Warp's and the trace caches filled), then the timed ones in turn, so a machine's drift
 spreads over all. Per run: the wall time, the stages' seconds from results.json summed over the rounds,
 the rest (imports, set-up, exit) and the last round's gain; then medians, and the wall time against the
-baseline's.
+baseline's. `--profile DIR` runs the timed runs under cProfile and `-X importtime` (DIR/<variant>_<run>.prof and
+.imports: where the time outside the stages goes); their wall times then include the profiler's overhead.
 """
 
 from __future__ import annotations
@@ -28,14 +30,20 @@ from pathlib import Path
 STAGES = ("collect", "summarize", "fit", "condition", "model_check", "guard", "score")
 
 
-def timed_run(overrides: list[str], src: str | None, run_dir: Path) -> dict:
+def timed_run(overrides: list[str], src: str | None, run_dir: Path, profile: Path | None = None) -> dict:
+    """One run's wall time and stage seconds; with `profile` (a path without suffix) also its cProfile and its
+    `-X importtime` log beside it."""
     env = dict(os.environ)
     if src:
         env["PYTHONPATH"] = os.pathsep.join([src, *filter(None, [env.get("PYTHONPATH")])])
-    cmd = [sys.executable, "-m", "bayessim_exp", *overrides, f"hydra.run.dir={run_dir}", "logging.progress=false"]
+    profiler = ["-X", "importtime", "-m", "cProfile", "-o", f"{profile}.prof"] if profile else []
+    cmd = [sys.executable, *profiler, "-m", "bayessim_exp", *overrides, f"hydra.run.dir={run_dir}",
+           "logging.progress=false"]
     start = time.perf_counter()
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - start
+    if profile:
+        Path(f"{profile}.imports").write_text(done.stderr)
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr[-2000:]}")
     rounds = json.loads((run_dir / "results.json").read_text())["rounds"]
@@ -52,6 +60,7 @@ def main() -> None:
                     help="a name, then its Hydra overrides; the first variant is the baseline")
     ap.add_argument("--src", action="append", default=[], metavar="NAME=PATH", help="also run each variant with PATH on PYTHONPATH")
     ap.add_argument("--json", help="write every run's figures here")
+    ap.add_argument("--profile", type=Path, help="profile the timed runs into this folder (cProfile, -X importtime)")
     ap.add_argument("common", nargs="*", help="overrides for every run (after --)")
     args = ap.parse_args()
     variants = [(v[0], v[1:], None) for v in (args.variant or [["default"]])]
@@ -60,10 +69,13 @@ def main() -> None:
         variants += [(f"{name}@{label}", overrides, str(Path(path).resolve())) for name, overrides, _ in variants
                      if "@" not in name]
     runs: dict[str, list[dict]] = {name: [] for name, _, _ in variants}
+    if args.profile:
+        args.profile.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         for rep in range(-args.warmup, args.reps):
             for k, (name, overrides, src) in enumerate(variants):
-                result = timed_run([*overrides, *args.common], src, Path(tmp) / f"{k}_{rep + args.warmup}")
+                profile = args.profile / f"{name}_{rep + 1}" if args.profile and rep >= 0 else None
+                result = timed_run([*overrides, *args.common], src, Path(tmp) / f"{k}_{rep + args.warmup}", profile)
                 if rep >= 0:
                     runs[name].append(result)
                 print(f"{'warm-up' if rep < 0 else f'run {rep + 1}'} {name}: {result['wall']:.1f} s "

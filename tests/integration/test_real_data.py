@@ -187,3 +187,28 @@ if __name__ == "__main__":  # the glitch test's runs with other offsets or setti
         print(json.dumps({"offset": args.offset, "overrides": args.overrides, "level": last["truth"]["hpd_level"],
                           "gain": last["log_prob_gain"], "summary_error": last["summary_error"],
                           "temperatures": [r["temperature"] for r in run["rounds"]]}), flush=True)
+
+
+def test_a_pendulum_outside_the_prior_s_box_hands_on_the_prior_not_a_posterior_on_its_corner(tmp_path, compose):
+    """A log of our own pendulum at 0.1 kg and 0.1 m, where the prior's box is [0.5, 2] x [0.25, 1]: no parameter in
+    the box reproduces it, and the honest answer is the prior with the warning that the box does not hold the robot.
+    The network's posterior there is an extrapolation collapsed on the box's corner (mass 0.5 +- 0, length 0.871 +-
+    3e-5 at this seed); its replay widening stopped at its floor with the replays still too narrow, so the guard reads
+    the distance from the training simulations that the widening otherwise stands in for. Before that, round 1
+    passed and its point mass was handed on."""
+    task = registry.build("task", compose(["sim=native"]).task)
+    rng = np.random.default_rng(100)
+    state = task.reset_state(rng, 1)
+    from bayessim_exp.policies import OpenLoopPolicy
+
+    actions = torch.as_tensor(independent_pendulum.excitation("random", 1, 50, rng), dtype=torch.float32)
+    pool = SimulatorPool(registry.build("sim", {"name": "native"}), task, chunk=4096)
+    traj = pool.rollout(np.array([[0.1, 0.1]]), OpenLoopPolicy(actions), 50, seed=0, state=state)
+    path = tmp_path / "outside.npz"
+    save_trajectories(path, traj, np.array([0.1, 0.1]), ["mass", "length"])
+    results = api.run(["real=file", f"real.path={path}", "sim=native", "collect.trajectories=2000", "rounds=2",
+                       "logging.progress=false", "logging.figures=false"], out_dir=tmp_path / "run")
+    assert results["handed_on"]["round"] == 0, results["handed_on"]
+    assert results["rounds"][0]["guard"]["near_real_data_only"], results["rounds"][0]["guard"]
+    for r in results["rounds"]:
+        assert r["guard"]["failed"] and any("outside the training simulations' range" in w for w in r["guard"]["warnings"]), r["guard"]

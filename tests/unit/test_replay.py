@@ -213,3 +213,31 @@ def test_with_an_error_model_the_check_reads_the_parameters_from_the_other_featu
     assert modelled.residual == clean.residual and modelled.residual_p_value == clean.residual_p_value
     assert modelled.flagged == clean.flagged
     assert torch.equal(modelled.feature_error, clean.feature_error)
+
+
+class _OneParameterFixed:
+    """A posterior whose draws vary the first parameter (about 1.0, sd 0.3) and all share the second (0.5): a probit
+    posterior saturated on the box's face."""
+
+    def sample(self, shape, generator=None):
+        varying = 1.0 + 0.3 * torch.randn(*shape, generator=generator, dtype=torch.float64)
+        return torch.stack([varying, torch.full_like(varying, 0.5)], -1)
+
+
+def test_a_posterior_with_a_parameter_every_draw_shares_is_too_narrow_for_data_its_replays_do_not_reproduce():
+    """Real data a replay at the centre would give plus an offset in a feature no parameter moves (beyond the
+    replays' residuals): a posterior varying both parameters holds their implied parameters, one whose draws all
+    share the second parameter cannot tell where along it they lie and is too narrow. Its Mahalanobis distance
+    ignored that parameter (no spread, no slope) and passed such a posterior collapsed on the box's corner, 0.5 +- 0
+    for a pendulum logged at 0.1 kg (test_real_data.py, the pendulum outside the prior's box)."""
+    A = torch.tensor([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0], [0.0, 0.0]], dtype=torch.float64)
+    offset = torch.tensor([0.0, 0.0, 0.0, 0.0, 0.05], dtype=torch.float64)
+    real = _linear_trajectories(torch.tensor([[1.0, 0.5]], dtype=torch.float64) @ A.T + offset)
+    varying = _linear_check(A, real, 0.09)
+    prior = GaussianMixture(torch.zeros(1), torch.tensor([[1.0, 0.5]], dtype=torch.float64),
+                            torch.eye(2, dtype=torch.float64)[None])
+    fixed = replayed_check(_noisy_linear(A, 1), real, _OneParameterFixed(), prior,
+                           summarize=lambda traj: traj.states[:, 0].double(), num=400, seed=0, alpha=0.01,
+                           max_distance_ratio=0.15)
+    assert varying.residual_p_value == [1 / 401] and fixed.residual_p_value == [1 / 401]
+    assert varying.too_narrow == [] and fixed.too_narrow == [0]

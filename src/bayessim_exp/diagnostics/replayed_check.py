@@ -44,7 +44,9 @@ Two readings (docs/statistics.md):
 - `too_narrow`: p <= alpha, the real data's implied parameters lie outside the posterior. Either the
   posterior misses the truth or no parameter value reproduces the data exactly (a simulator slightly
   unlike the real system) and the posterior is narrower than that model error; widening it
-  (inference/bayessim/replay_tempering.py) is the remedy for both.
+  (inference/bayessim/replay_tempering.py) is the remedy for both. A posterior whose draws all share a
+  parameter's value is too narrow wherever the residual is beyond the replays': the replays cannot tell
+  where along that parameter the real data lie.
 - `flagged` (model mismatch): the residual is beyond the replays' and its excess exceeds
   `max_distance_ratio` of the real summary's median distance to the prior's replays: at the parameters
   the posterior concentrates on, the simulator leaves a sizeable part of what the prior could not explain
@@ -170,6 +172,10 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
             excess = (per_feature[-1] ** 2 - per_feature[:-1].pow(2).median(0).values).clamp_min(0.0)
             inverse = torch.linalg.inv(gram)
             error_covariance += inverse @ (slopes.T * excess) @ slopes @ inverse / n
+        if residual_p[-1] <= alpha and bool((theta.std(0) == 0).any()):
+            # a parameter every draw shares (a probit posterior saturated on the box's face) has no slope, so its
+            # implied value is the draws' own: the real data not reproduced, that width of zero is too narrow
+            mahalanobis[-1] = math.inf
         p_values.append(rank_p_value(mahalanobis[:-1], mahalanobis[-1]))
     states_post = post.states.double().cpu().reshape(n, num, *post.states.shape[1:])
     states_prior = pri.states.double().cpu().reshape(n, num, *pri.states.shape[1:])

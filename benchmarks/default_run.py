@@ -2,7 +2,7 @@
 
     python benchmarks/default_run.py [--reps 3] [--warmup 1]
         [--variant gpu device=cuda] [--variant cpu device=cpu sim=native] [--src old=PATH] [--profile DIR]
-        [-- OVERRIDES]
+        [--keep DIR] [-- OVERRIDES]
 
 Each `--variant NAME OVERRIDE...` is a set of Hydra overrides (the first is the baseline; default: one
 variant `default` with none); `--src NAME=PATH` adds, per variant, a copy run with PATH first on
@@ -13,6 +13,7 @@ spreads over all. Per run: the wall time, the stages' seconds from results.json 
 the rest (imports, set-up, exit) and the last round's gain; then medians, and the wall time against the
 baseline's. `--profile DIR` runs the timed runs under cProfile and `-X importtime` (DIR/<variant>_<run>.prof and
 .imports: where the time outside the stages goes); their wall times then include the profiler's overhead.
+`--keep DIR` keeps every run's directory there (results.json: what each round proposed from and handed on).
 """
 
 from __future__ import annotations
@@ -60,6 +61,7 @@ def main() -> None:
                     help="a name, then its Hydra overrides; the first variant is the baseline")
     ap.add_argument("--src", action="append", default=[], metavar="NAME=PATH", help="also run each variant with PATH on PYTHONPATH")
     ap.add_argument("--json", help="write every run's figures here")
+    ap.add_argument("--keep", type=Path, help="keep the runs' directories in this folder (default: a temporary one)")
     ap.add_argument("--profile", type=Path, help="profile the timed runs into this folder (cProfile, -X importtime)")
     ap.add_argument("common", nargs="*", help="overrides for every run (after --)")
     args = ap.parse_args()
@@ -71,7 +73,8 @@ def main() -> None:
     runs: dict[str, list[dict]] = {name: [] for name, _, _ in variants}
     if args.profile:
         args.profile.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as scratch:
+        tmp = args.keep or scratch
         for rep in range(-args.warmup, args.reps):
             for k, (name, overrides, src) in enumerate(variants):
                 profile = args.profile / f"{name}_{rep + 1}" if args.profile and rep >= 0 else None

@@ -147,18 +147,24 @@ def covered(r: dict) -> bool:
 
 
 def summary(rows: list[dict]) -> list[str]:
-    lines = ["| group | n | cases | truth or best fit in the 90 % region | flagged | widened (temperature < 1) |",
-             "|---|---:|---:|---:|---:|---:|"]
+    lines = ["| group | n | cases | median gain at the truth (share of the well-specified median) | truth or best fit "
+             "in the 90 % region | best fit in it | flagged | widened (temperature < 1) |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for group in dict.fromkeys(r["group"] for r in rows):
         for n in (1, 5):
             sel = [r for r in rows if r["group"] == group and r["n"] == n]
             if not sel:
                 continue
             inside = sum(map(covered, sel))
+            best_fit_inside = sum(r["level_best_fit"] < 0.9 for r in sel)
             flagged = sum(r["flagged"] for r in sel)
             widened = sum(r["temperature"] < 1 for r in sel)
-            lines.append(f"| {group} | {n} | {len(sel)} | {inside} ({inside / len(sel):.0%}) | "
-                         f"{flagged} ({flagged / len(sel):.0%}) | {widened} |")
+            gain = float(np.median([r["gain_truth"] for r in sel]))
+            well = [r["gain_truth"] for r in rows if r["group"] == "well specified" and r["n"] == n]
+            share = f" ({gain / float(np.median(well)):.0%})" if well and float(np.median(well)) > 0 else ""
+            lines.append(f"| {group} | {n} | {len(sel)} | {gain:+.1f}{share} | {inside} ({inside / len(sel):.0%}) | "
+                         f"{best_fit_inside} ({best_fit_inside / len(sel):.0%}) | {flagged} ({flagged / len(sel):.0%}) "
+                         f"| {widened} |")
 
     def share(sel: list[dict], hit) -> str:
         return f"{sum(map(hit, sel))} of {len(sel)}"

@@ -162,14 +162,15 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
         p_value = implied_p_value(implied)
         read = ~modelled[keep]  # the features the model reads the parameters from
         if not bool(read.all()) and int(read.sum()) > dim:
-            implied, residual, gram, slopes, per_feature = implied_parameters(z_sims[:, read], theta,
-                                                                              torch.cat([z_sims, z_real])[:, read])
-            p_all, p_value = p_value, implied_p_value(implied)
-            if rank_p_value(residual[:-1], residual[-1]) <= alpha:
+            reduced = implied_parameters(z_sims[:, read], theta, torch.cat([z_sims, z_real])[:, read])
+            if rank_p_value(reduced[1][:-1], reduced[1][-1]) > alpha:  # the error model explains the residual
+                implied, residual, gram, slopes, per_feature = reduced
+                p_value = implied_p_value(implied)
+            else:
                 # what the error model leaves is still beyond the replays': the other features carry model error
-                # too, and the parameters read from them need not hold it (physics the model lacks); the nearer
-                # of the two reads
-                p_value = min(p_value, p_all)
+                # too (physics the model lacks), and the parameters read from them need not hold it; the error
+                # read on all features, and the nearer of the two reads' p-values
+                p_value = min(p_value, implied_p_value(reduced[0]))
         if rank_p_value(residual[:-1], residual[-1]) <= alpha:
             # per feature, the real residual's square beyond the replays' median square: the parameter covariance
             # of least squares with that error in each feature (the sandwich G^-1 B^T diag(v) B G^-1)

@@ -39,6 +39,8 @@ implied parameters, their p-values and `model_error_covariance` are read from th
 trained with that noise reads the parameters from them (replays with the noise added instead held any real data
 whose noisy features dominate the unweighted fit, and physics the model lacks went unwidened: docs/statistics.md);
 the residuals, the flag and `feature_error` stay on all features: what the simulator itself leaves unexplained.
+Where the other features' residual is still beyond the replays' (an error spread over the features, not in a
+few), `model_error_covariance` is read on all features and the p-value is the smaller of the two reads'.
 
 Two readings (docs/statistics.md):
 - `too_narrow`: p <= alpha, the real data's implied parameters lie outside the posterior. Either the

@@ -431,6 +431,9 @@ def test_real_data_outside_the_simulations_get_the_prior_not_an_extrapolated_pos
     assert len(second["summary_error"]["features"]) >= first["mismatch"]["summaries_outside"]["features_outside"][0]
     assert second["extrapolation"]["flagged"] == [], second["extrapolation"]
     assert second["guard"]["action"] == "fallback" and second["guard"]["handed_on"] == first["guard"]["handed_on"]
+    # the model failed on its own held-out simulations, not for data outside them
+    assert not second["guard"]["near_real_data_only"], second["guard"]
+    assert any("on held-out simulations" in w for w in second["guard"]["warnings"]), second["guard"]
     assert first["mismatch"]["flagged"] and second["mismatch"]["flagged"]
     assert second["proposal_from"] == "round 1's linear read of its real data"  # where the data point
 

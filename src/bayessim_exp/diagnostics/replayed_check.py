@@ -161,19 +161,17 @@ def replayed_check(simulate: Callable[[torch.Tensor, torch.Tensor], Trajectories
             # standardised() divided feature f by scale_f sqrt(kept): its variance, back in the summaries' units
             to_units = (scale[keep] * math.sqrt(int(keep.sum()))) ** 2
             feature_error[keep] += unexplained_features(per_feature, alpha) * to_units / n
-        p_value = implied_p_value(implied)
+        p_value, explained = implied_p_value(implied), False
         read = ~modelled[keep]  # the features the model reads the parameters from
         if not bool(read.all()) and int(read.sum()) > dim:
-            reduced = implied_parameters(z_sims[:, read], theta, torch.cat([z_sims, z_real])[:, read])
-            if rank_p_value(reduced[1][:-1], reduced[1][-1]) > alpha:  # the error model explains the residual
-                implied, residual, gram, slopes, per_feature = reduced
-                p_value = implied_p_value(implied)
-            else:
-                # what the error model leaves is still beyond the replays': the other features carry model error
-                # too (physics the model lacks), and the parameters read from them need not hold it; the error
-                # read on all features, and the nearer of the two reads' p-values
-                p_value = min(p_value, implied_p_value(reduced[0]))
-        if rank_p_value(residual[:-1], residual[-1]) <= alpha:
+            reduced, reduced_residual, _, _, _ = implied_parameters(z_sims[:, read], theta,
+                                                                    torch.cat([z_sims, z_real])[:, read])
+            explained = rank_p_value(reduced_residual[:-1], reduced_residual[-1]) > alpha
+            # explained: the parameters read from the other features, as q reads them, and no model error left to
+            # widen for; else those features carry model error too (physics the model lacks) and the parameters
+            # read from them need not hold it: the error read on all features, the nearer of the two p-values
+            p_value = implied_p_value(reduced) if explained else min(p_value, implied_p_value(reduced))
+        if residual_p[-1] <= alpha and not explained:
             # per feature, the real residual's square beyond the replays' median square: the parameter covariance
             # of least squares with that error in each feature (the sandwich G^-1 B^T diag(v) B G^-1)
             excess = (per_feature[-1] ** 2 - per_feature[:-1].pow(2).median(0).values).clamp_min(0.0)

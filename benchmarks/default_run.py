@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -38,6 +39,7 @@ def timed_run(overrides: list[str], src: str | None, run_dir: Path, profile: Pat
     if src:
         env["PYTHONPATH"] = os.pathsep.join([src, *filter(None, [env.get("PYTHONPATH")])])
     profiler = ["-X", "importtime", "-m", "cProfile", "-o", f"{profile}.prof"] if profile else []
+    shutil.rmtree(run_dir, ignore_errors=True)  # a run resumes from the stage files it finds (--keep's from before)
     cmd = [sys.executable, *profiler, "-m", "bayessim_exp", *overrides, f"hydra.run.dir={run_dir}",
            "logging.progress=false"]
     start = time.perf_counter()

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import shutil
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -91,7 +92,9 @@ def run_case(case: dict) -> dict:
     from bayessim_exp.sim.pool import SimulatorPool
 
     out = Path(case["dir"])
-    out.mkdir(parents=True, exist_ok=True)
+    # a clean directory: a run resumes from the stage files it finds, which an earlier run's would be
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
     data_path = out / "real.npz"
     write_case(case["source"], case["mass"], case["length"], case["n"], case["seed"], case["actions"], data_path)
     t0 = time.perf_counter()

@@ -7,8 +7,11 @@ space of the shapes the many-parameter tasks give (docs/benchmarks.md, "Rounds t
 Each posterior sits in the prior's joint tail (every probit coordinate at -1.3, a multiplier of 1 in [0.1, 10]) with
 standard deviations given per row, its axes rotated at random: `narrow`, all 0.05; `mixed`, a third at 0.05 and the
 rest at 0.9 (identified and barely identified parameters); `3 components`, three narrow ones a little apart (an
-ensemble's mixture). Before distributions/relaxed_cover.py the candidates were the prior restricted to a box around
-the region: in 30 dimensions it kept 0.00095 of them on ShadowHand's round 2 and the round simulated from the prior.
+ensemble's mixture); `50 diagonal components`, `mixed`'s spreads on the parameters' own axes in 50 components a
+little apart (a diagonal ensemble's product over three trajectories, as ShadowHand_more's third round has). Before
+distributions/relaxed_cover.py the candidates were the prior restricted to a box around the region: in 30
+dimensions it kept 0.00095 of them on ShadowHand's round 2 and the round simulated from the prior.
+Against another commit's code: PYTHONPATH=<its src> python benchmarks/truncated_sampling.py.
 """
 
 from __future__ import annotations
@@ -24,14 +27,19 @@ from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
 from bayessim_exp.distributions.truncated_prior import TruncatedPrior
 
 
+SHAPES = ("narrow", "mixed", "3 components", "50 diagonal components")
+
+
 def posterior(dim: int, shape: str, generator: torch.Generator) -> GaussianMixture:
-    components = 3 if shape == "3 components" else 1
+    components = {"3 components": 3, "50 diagonal components": 50}.get(shape, 1)
     std = torch.full((dim,), 0.05, dtype=torch.float64)
-    if shape == "mixed":
+    if shape in ("mixed", "50 diagonal components"):
         std[dim // 3:] = 0.9
+    means = -1.3 + 0.1 * torch.randn(components, dim, dtype=torch.float64, generator=generator)
+    if shape == "50 diagonal components":  # a diagonal model's product over three trajectories, capped at 50
+        return GaussianMixture(torch.zeros(components), means, torch.diag(std**2).expand(components, dim, dim))
     rotation, _ = torch.linalg.qr(torch.randn(dim, dim, dtype=torch.float64, generator=generator))
     cov = rotation @ torch.diag(std**2) @ rotation.T
-    means = -1.3 + 0.1 * torch.randn(components, dim, dtype=torch.float64, generator=generator)
     return GaussianMixture(torch.zeros(components), means, cov.expand(components, dim, dim))
 
 
@@ -43,7 +51,7 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for dim in (30, 102):
         prior = BoxUniform(torch.full((dim,), 0.1, dtype=torch.float64), torch.full((dim,), 10.0, dtype=torch.float64))
-        for shape in ("narrow", "mixed", "3 components"):
+        for shape in SHAPES:
             inner = posterior(dim, shape, torch.Generator().manual_seed(dim))
             start = time.perf_counter()
             proposal = TruncatedPrior(prior, ProbitPosterior(inner, ProbitTransform(prior)), seed=1)

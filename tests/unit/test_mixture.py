@@ -112,3 +112,18 @@ def test_a_batch_of_mixtures_matches_its_rows_one_by_one():
     for i in range(n):
         torch.testing.assert_close(draws[:, i].mean(0), rows[i].mean, atol=0.05, rtol=0)
         torch.testing.assert_close(torch.cov(draws[:, i].T), rows[i].covariance, atol=0.1, rtol=0.05)
+
+
+def test_a_diagonal_mixture_s_density_is_the_multivariate_normals_near_its_components_and_far_from_them():
+    # the diagonal path expands the quadratic form into matrix products: it must keep float64's accuracy where the
+    # points sit on a narrow component (cancellation) and where they are far from all of them
+    g = torch.Generator().manual_seed(0)
+    d, k = 102, 50
+    means = -1.3 + 0.1 * torch.randn(k, d, dtype=torch.float64, generator=g)
+    std = torch.exp(torch.empty(k, d, dtype=torch.float64).uniform_(math.log(1e-3), math.log(2.0), generator=g))
+    mix = GaussianMixture(torch.randn(k, generator=g), means, torch.diag_embed(std**2))
+    points = torch.cat([means[:5] + 1e-3 * torch.randn(5, d, dtype=torch.float64, generator=g),
+                        3 * torch.randn(5, d, dtype=torch.float64, generator=g)])
+    reference = torch.stack([torch.distributions.MultivariateNormal(m, torch.diag(s**2)).log_prob(points)
+                             for m, s in zip(means, std)], -1)
+    torch.testing.assert_close(mix.component_log_prob(points), reference, rtol=1e-10, atol=1e-6)

@@ -166,3 +166,20 @@ def test_draws_stay_in_the_region_once_stored_in_float32():
     proposal = TruncatedPrior(prior, ProbitPosterior(at_face, ProbitTransform(prior)), seed=0)
     stored = proposal.sample((20_000,), generator=torch.Generator().manual_seed(1)).float().double()
     assert torch.isfinite(proposal.log_prob(stored)).all()
+
+
+@pytest.mark.parametrize("prior_name", PRIORS)
+def test_a_diagonal_mixture_s_draws_and_mass_match_rejection_from_the_whole_prior(prior_name):
+    # a diagonal model's posterior (relaxed_cover.py's elementwise path), several components of different weights
+    prior = PRIORS[prior_name]
+    mixture = GaussianMixture(torch.tensor([0.0, -0.7, 0.4]), torch.tensor([[0.1, 0.0], [0.3, 0.1], [0.0, -0.15]]),
+                              torch.diag_embed(torch.tensor([[0.004, 0.002], [0.001, 0.003], [0.002, 0.005]])))
+    proposal = TruncatedPrior(prior, ProbitPosterior(mixture, ProbitTransform(prior)), seed=1)
+    reference = prior.sample((2_000_000,), generator=torch.Generator().manual_seed(7)).double()
+    inside = proposal._in_region(reference)
+    assert abs(proposal.mass / inside.double().mean().item() - 1) < 0.05
+    draws = proposal.sample((20_000,), generator=torch.Generator().manual_seed(0))
+    assert proposal._in_region(draws).all()
+    expected = reference[inside]
+    assert ((draws.mean(0) - expected.mean(0)).abs() < 5 * expected.std(0) / math.sqrt(len(draws))).all()
+    assert ((draws.std(0) / expected.std(0) - 1).abs() < 0.03).all()

@@ -24,6 +24,11 @@ _LOG_2PI = math.log(2 * math.pi)
 _JITTER = (1e-12, 1e-10, 1e-8, 1e-6, 1e-4)
 
 
+def is_diagonal(matrices: torch.Tensor) -> bool:
+    """Every [..., D, D] matrix zero off its diagonal."""
+    return not bool(torch.any(matrices - torch.diag_embed(torch.diagonal(matrices, dim1=-2, dim2=-1))))
+
+
 class NotPositiveDefinite(ValueError):
     """A covariance double precision cannot factorise, jitter included (variances 1e14 beside 1e-10)."""
 
@@ -107,12 +112,19 @@ class GaussianMixture(ParameterDistribution):
     def component_log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         """log N(theta; mean_k, cov_k) for every component: [..., K]."""
         flat = theta.double().reshape(-1, self.dim)
-        # one triangular solve per component over all points: [K, D, N], never [N, K, D, D]
-        diff = flat.T.unsqueeze(0) - self.means.unsqueeze(-1)
-        z = torch.linalg.solve_triangular(self.scale_tril, diff, upper=False)
-        half_logdet = torch.log(torch.diagonal(self.scale_tril, dim1=-2, dim2=-1)).sum(-1)
-        out = -0.5 * (z**2).sum(1) - half_logdet[:, None] - 0.5 * self.dim * _LOG_2PI
-        return out.T.reshape(*theta.shape[:-1], self.num_components)
+        std = torch.diagonal(self.scale_tril, dim1=-2, dim2=-1)  # [K, D]
+        half_logdet = torch.log(std).sum(-1)
+        if is_diagonal(self.scale_tril):
+            # a diagonal model's posteriors: K D per point, not K D^2, expanded into three matrix products; centred on
+            # the components' mean first, so the expansion cancels only where the points are far from every component
+            centre = self.means.mean(0)
+            x, m, precision = flat - centre, self.means - centre, std.pow(-2)
+            quadratic = ((x * x) @ precision.T - 2 * x @ (precision * m).T + (precision * m * m).sum(-1)).clamp_min(0)
+        else:  # one triangular solve per component over all points: [K, D, N], never [N, K, D, D]
+            diff = flat.T.unsqueeze(0) - self.means.unsqueeze(-1)
+            quadratic = torch.linalg.solve_triangular(self.scale_tril, diff, upper=False).pow(2).sum(1).T
+        out = -0.5 * quadratic - half_logdet - 0.5 * self.dim * _LOG_2PI
+        return out.reshape(*theta.shape[:-1], self.num_components)
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         return torch.logsumexp(self.log_weights + self.component_log_prob(theta), -1)

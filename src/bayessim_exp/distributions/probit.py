@@ -102,7 +102,8 @@ class ProbitPosterior(ParameterDistribution):
 
     def log_prob(self, theta: torch.Tensor) -> torch.Tensor:
         theta = theta.double()
-        lp = self.inner.log_prob(self.transform.to_probit(theta)).double() + self.transform.log_abs_det_jacobian(theta)
+        u = self.transform.to_probit(theta)
+        lp = self.inner.log_prob(u).double() + self.transform.log_abs_det_jacobian(theta, u)
         return restrict_log_prob(lp, theta, self.low, self.high)
 
 

@@ -73,20 +73,24 @@ def test_the_record_holds_each_temperature_tried_and_ties_go_to_the_narrower():
     assert len(record["inside"]) == 5 + 6  # the coarse grid down to two steps past 0.5, then eighths on both sides
 
 
-def _mixture_near(g: torch.Generator, u: torch.Tensor, components: int, wide: bool) -> GaussianMixture:
-    """Components of random orientation around u [D]; `wide`: the first one wider than the N(0, I) prior along
-    one axis."""
+def _mixture_near(g: torch.Generator, u: torch.Tensor, components: int, wide: bool,
+                  diagonal: bool = False) -> GaussianMixture:
+    """Components of random orientation (or on the axes: `diagonal`, a diagonal model's) around u [D]; `wide`: the
+    first one wider than the N(0, I) prior along one axis."""
     dim = len(u)
     a = torch.randn(components, dim, dim, dtype=torch.float64, generator=g)
     covs = 0.1 * a @ a.transpose(-1, -2) + 0.05 * torch.eye(dim, dtype=torch.float64)
+    if diagonal:
+        covs = torch.diag_embed(torch.diagonal(covs, dim1=-2, dim2=-1))
     if wide:
         covs[0, 0, 0] += 2.5
     means = u + 0.3 * torch.randn(components, dim, dtype=torch.float64, generator=g)
     return GaussianMixture(torch.randn(components, generator=g), means, covs)
 
 
+@pytest.mark.parametrize("covariance", ["full", "diagonal"])
 @pytest.mark.parametrize("space", ["probit", "gaussian prior, corrected proposal"])
-def test_the_sets_read_together_give_each_set_its_own_level_as_set_by_set(space, caplog):
+def test_the_sets_read_together_give_each_set_its_own_level_as_set_by_set(space, covariance, caplog):
     """condition.tempered_products' MixtureStack read by own_levels: the levels of the loop over each set's
     tempered_product and own_level, from the same random stream, to rounding. Some sets' plain products have no
     closed form at some temperatures (every trajectory's first component wider than the prior along one axis: their
@@ -109,13 +113,15 @@ def test_the_sets_read_together_give_each_set_its_own_level_as_set_by_set(space,
         prior, probit = GaussianPrior(torch.zeros(dim), torch.ones(dim)), None
         proposal = GaussianMixture(torch.zeros(1), 0.1 * torch.ones(1, dim), 0.8 * torch.eye(dim)[None])
         theta = u = torch.randn(sets, dim, dtype=torch.float64, generator=g)
-    conditionals = [[_mixture_near(g, u[s], 2, wide=s % 3 == 0) for _ in range(n)] for s in range(sets)]
+    conditionals = [[_mixture_near(g, u[s], 2, wide=s % 3 == 0, diagonal=covariance == "diagonal") for _ in range(n)]
+                    for s in range(sets)]
     together = tempered_products(conditionals, prior, 50, proposal, 0, probit)
     one_by_one = [tempered_product(c, prior, 50, proposal, 0, probit, warn=False) for c in conditionals]
     with caplog.at_level("INFO"):
         for tau in (1.0, 0.7, 0.3):
             stack = together(tau)
             assert isinstance(stack, MixtureStack) and len(stack) == sets
+            assert (stack.diagonal_std is not None) == (covariance == "diagonal")
             read = own_levels(stack, theta, 200, torch.Generator().manual_seed(5))
             g_each = torch.Generator().manual_seed(5)
             each = torch.tensor([own_level(p(tau), t, 200, g_each) for p, t in zip(one_by_one, theta)],

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import torch
 
 from .box import restrict_log_prob
-from .mixture import GaussianMixture, _cholesky
+from .mixture import GaussianMixture, _cholesky, is_diagonal
 from .probit import ProbitTransform
 
 _LOG_2PI = math.log(2 * math.pi)
@@ -77,6 +77,12 @@ class MixtureStack:
         return 2 * torch.log(torch.diagonal(self.scale_tril, dim1=-2, dim2=-1)).sum(-1)
 
     @functools.cached_property
+    def diagonal_std(self) -> torch.Tensor | None:
+        """The components' standard deviations [S, K, D] where every covariance is diagonal (a diagonal model's
+        sets: draws and densities elementwise, D per point instead of D^2), else None."""
+        return torch.diagonal(self.scale_tril, dim1=-2, dim2=-1) if is_diagonal(self.scale_tril) else None
+
+    @functools.cached_property
     def _weights(self) -> torch.Tensor:
         return self.log_weights.exp().cpu()
 
@@ -124,12 +130,18 @@ class MixtureStack:
 
     def _component_draws(self, s: slice, comp: torch.Tensor, eps: torch.Tensor) -> torch.Tensor:
         rows = torch.arange(comp.shape[0], device=comp.device)[:, None]
+        if self.diagonal_std is not None:
+            return self.means[s][rows, comp] + self.diagonal_std[s][rows, comp] * eps
         return self.means[s][rows, comp] + (self.scale_tril[s][rows, comp] @ eps.unsqueeze(-1)).squeeze(-1)
 
     def _mixture_log_prob(self, s: slice, u: torch.Tensor) -> torch.Tensor:
-        """GaussianMixture.log_prob of members s at their points u [s, N, D]: one triangular solve per component."""
+        """GaussianMixture.log_prob of members s at their points u [s, N, D]: one triangular solve per component
+        (a division where the covariances are diagonal)."""
         diff = u.transpose(-1, -2).unsqueeze(1) - self.means[s].unsqueeze(-1)  # [s, K, D, N]
-        z = torch.linalg.solve_triangular(self.scale_tril[s], diff, upper=False)
+        if self.diagonal_std is not None:
+            z = diff / self.diagonal_std[s].unsqueeze(-1)
+        else:
+            z = torch.linalg.solve_triangular(self.scale_tril[s], diff, upper=False)
         half_logdet = torch.log(torch.diagonal(self.scale_tril[s], dim1=-2, dim2=-1)).sum(-1)
         component = -0.5 * (z**2).sum(-2) - half_logdet[..., None] - 0.5 * self.dim * _LOG_2PI  # [s, K, N]
         return torch.logsumexp(self.log_weights[s, :, None] + component, 1)

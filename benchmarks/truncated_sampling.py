@@ -26,7 +26,6 @@ from bayessim_exp.distributions.mixture import GaussianMixture
 from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
 from bayessim_exp.distributions.truncated_prior import TruncatedPrior
 
-
 SHAPES = ("narrow", "mixed", "3 components", "50 diagonal components")
 
 

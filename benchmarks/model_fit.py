@@ -1,12 +1,14 @@
 """Posterior-model training speed: the same fit on the CPU and on a GPU, eager and from a CUDA graph.
 
     python benchmarks/model_fit.py [--models mdnn mdrff flow] [--sims 10000] [--epochs 20]
-        [--theta-dim 2] [--x-dim 6] [--batch-size 256]
+        [--theta-dim 2] [--x-dim 6] [--batch-size 256] [--set KEY=VALUE ...] [--threads N ...]
 
 Synthetic pairs (x = A theta + noise) of the pipeline's default size; every fit runs exactly
 `--epochs` epochs (patience = epochs), so rows compare the same work. Rows per model: `cpu` (the
 baseline, the machine's torch threads), `cuda eager` (one kernel launch at a time) and `cuda graph`
-(the step replayed from a CUDA graph, what the pipeline does with device=cuda). Mixture models (mdnn,
+(the step replayed from a CUDA graph, what the pipeline does with device=cuda); with `--threads`, one
+`cpu` row per torch thread count (the first is the baseline). `--set` overrides the models' config
+(`--set ensemble=3 covariance=full components=1`: the mission's ShadowHand model). Mixture models (mdnn,
 mdrff) get a `matrix loss` row per device as well: the loss by autograd through the assembled precision
 factors (`mixture_nll`) instead of the head's loss with its written-out gradient (`HeadNLL`).
 """
@@ -14,9 +16,11 @@ factors (`mixture_nll`) instead of the head's loss with its written-out gradient
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import torch
+import yaml
 
 from bayessim_exp.models import adam_steps, base, mdnn
 from bayessim_exp.models.mixture_nll import mixture_nll
@@ -58,25 +62,33 @@ def main() -> None:
     ap.add_argument("--theta-dim", type=int, default=2)
     ap.add_argument("--x-dim", type=int, default=6)
     ap.add_argument("--batch-size", type=int, default=256)
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="model config overrides (YAML values)")
+    ap.add_argument("--threads", nargs="+", type=int, default=[torch.get_num_threads()])
     args = ap.parse_args()
+    overrides = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in args.set)}
     theta, x = pairs(args.sims, args.theta_dim, args.x_dim)
     # training steps only: the spread calibration after them (mixtures) is not an epoch's cost
-    cfg = {"max_epochs": args.epochs, "patience": args.epochs, "batch_size": args.batch_size, "calibrate": False}
-    variants = [("cpu", "cpu", False)]
+    cfg = {**overrides, "max_epochs": args.epochs, "patience": args.epochs, "batch_size": args.batch_size,
+           "calibrate": False}
+    variants = [(f"cpu, {n} threads" if len(args.threads) > 1 else "cpu", "cpu", False, n) for n in args.threads]
     if torch.cuda.is_available():
-        variants += [("cuda eager", "cuda", False), ("cuda graph", "cuda", True)]
+        cpu_threads = args.threads[0]
+        variants += [("cuda eager", "cuda", False, cpu_threads), ("cuda graph", "cuda", True, cpu_threads)]
     for name in args.models:  # one-time costs (imports, CUDA context, kernel loading) before timing
-        for _, device, graphed in variants:
+        for _, device, graphed, threads in variants:
+            torch.set_num_threads(threads)
             timed_fit(name, {**cfg, "max_epochs": 1}, theta[:1000], x[:1000], device, graphed)
     print(f"{args.sims} pairs, theta {args.theta_dim}-D, x {args.x_dim}-D, batch {args.batch_size}, "
-          f"{args.epochs} epochs; torch {torch.__version__}, {torch.get_num_threads()} CPU threads"
+          f"{args.epochs} epochs, {overrides or 'defaults'}; torch {torch.__version__}, {os.cpu_count()} CPUs"
           + (f", {torch.cuda.get_device_name()}" if torch.cuda.is_available() else ""))
-    print(f"{'model':<8} {'where':<26} {'s per epoch':>12} {'vs cpu':>8}")
+    print(f"{'model':<8} {'where':<26} {'s per epoch':>12} {'vs first':>8}")
     for name in args.models:
         baseline = None
         mixture = name in ("mdnn", "mdrff")
-        for label, device, graphed in variants:
-            for matrix_loss in (False, True) if mixture else (False,):
+        for label, device, graphed, threads in variants:
+            torch.set_num_threads(threads)
+            # the loss by autograd: one row per device, not per thread count
+            for matrix_loss in (False, True) if mixture and len(args.threads) == 1 else (False,):
                 per_epoch = timed_fit(name, cfg, theta, x, device, graphed, matrix_loss) / args.epochs
                 baseline = baseline or per_epoch
                 label_ = f"{label}, matrix loss" if matrix_loss else label

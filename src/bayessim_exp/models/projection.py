@@ -32,6 +32,7 @@ class RidgeSystem:
         self.y = y.double()
         self.dual = z.shape[1] > len(z)
         self._gram = None  # the dual's z z^T over all rows (formed at its first solve)
+        self._kernel_of = None  # (rows left out, z, y, centred kernel) of the last dual solve
         if not self.dual:
             self.gram, self.moment = self.design.T @ self.design, self.design.T @ self.y
 
@@ -48,6 +49,24 @@ class RidgeSystem:
         return torch.linalg.solve(gram + torch.diag(reg), moment)
 
     def _solve_dual(self, penalty: float, leave_out: torch.Tensor | None) -> torch.Tensor:
+        z, y, kernel = self._centred_kernel(leave_out)
+        shifted = kernel.clone()
+        shifted.diagonal().add_(penalty)
+        # positive definite for any penalty > 0: Cholesky, half the work of a general solve
+        factor = torch.linalg.cholesky(shifted)
+        del shifted
+        z_mean, y_mean = z.mean(0), y.mean(0)
+        alpha = torch.cholesky_solve(y - y_mean, factor)
+        w = z.T @ alpha - z_mean[:, None] * alpha.sum(0)  # (z - mean)^T alpha without the centred copy of z
+        return torch.cat([w, (y_mean - z_mean @ w)[None]])
+
+    def _centred_kernel(self, leave_out: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(z, y, (z - mean)(z - mean)^T) of the rows kept, the kernel kept for the next solve on the same rows
+        (penalties are tried on one split: forming it took twice a Cholesky's time, docs/benchmarks.md)."""
+        cached = self._kernel_of
+        if cached is not None and (cached[0] is None if leave_out is None
+                                   else cached[0] is not None and torch.equal(cached[0], leave_out)):
+            return cached[1:]
         if self._gram is None:  # rows^2 x features: the dual's cost, paid once
             z_all = self.design[:, :-1]
             self._gram = z_all @ z_all.T
@@ -55,15 +74,11 @@ class RidgeSystem:
         if leave_out is not None:
             keep = ~leave_out
             z, y, gram = z[keep], y[keep], gram[keep][:, keep]
-        z_mean, y_mean = z.mean(0), y.mean(0)
-        # the centred rows' kernel (z - mean)(z - mean)^T from the Gram by double centring
+        # the centred rows' kernel from the Gram by double centring
         row = gram.mean(1, keepdim=True)
         kernel = gram - row - row.T + gram.mean()
-        # positive definite for any penalty > 0: Cholesky, half the work of a general solve
-        factor = torch.linalg.cholesky(kernel + penalty * torch.eye(len(kernel), dtype=kernel.dtype, device=kernel.device))
-        alpha = torch.cholesky_solve(y - y_mean, factor)
-        w = z.T @ alpha - z_mean[:, None] * alpha.sum(0)  # (z - mean)^T alpha without the centred copy of z
-        return torch.cat([w, (y_mean - z_mean @ w)[None]])
+        self._kernel_of = (None if leave_out is None else leave_out.clone(), z, y, kernel)
+        return z, y, kernel
 
     def predict(self, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
         return self.design[rows] @ weights

@@ -29,8 +29,8 @@ from bayessim_exp.registry import build
 HEAD_NLL = mdnn.MixtureHead.nll
 
 
-def matrix_form_nll(head: mdnn.MixtureHead, h: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
-    return mixture_nll(*head(h), theta)
+def matrix_form_nll(head: mdnn.MixtureHead, out: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
+    return mixture_nll(*head(out), theta)
 
 
 def pairs(n: int, theta_dim: int, x_dim: int) -> tuple[torch.Tensor, torch.Tensor]:

@@ -84,8 +84,13 @@ def test_ensemble_is_the_equally_weighted_average_of_different_members():
     post = model.conditional(x_obs)
     assert post.num_components == 6
     members = []
-    for member in model.members:  # each member alone, as a one-network MDNN would condition (same spread factors)
-        logits, means, U = member(model.inputs(x_obs[None]))
+    networks = model.members
+    for m in range(3):  # each member alone, as a one-network MDNN would condition (same spread factors)
+        h = model.inputs(x_obs[None])
+        for i, (weight, bias) in enumerate(zip(networks.weights, networks.biases)):  # the member's own layers
+            h = torch.nn.functional.linear(h, weight[m].T, bias[m, 0])
+            h = torch.relu(h) if i < len(networks.weights) - 1 else h
+        logits, means, U = model.head(h)
         U_inv = torch.linalg.inv(model.spread.scale_factors(U)[0].double())
         members.append(GaussianMixture(logits[0], means[0], U_inv @ U_inv.transpose(-1, -2))
                        .affine(model.theta_norm.shift, model.theta_norm.scale))
@@ -93,3 +98,22 @@ def test_ensemble_is_the_equally_weighted_average_of_different_members():
     densities = torch.stack([m.log_prob(points) for m in members])
     torch.testing.assert_close(post.log_prob(points), torch.logsumexp(densities, 0) - math.log(3))
     assert not torch.allclose(members[0].mean, members[1].mean)  # initialised apart
+
+
+def test_a_state_saved_with_one_network_per_member_loads_into_the_stacked_members():
+    """States saved before the members' layers were stacked (a ModuleList of nn.Sequential members, the head's layer
+    at `<m>.<i>.out`) still condition as they did."""
+    theta, x, _, _ = linear_gaussian(600)
+    model = api.fit_posterior_model("mdnn", theta, x, components=2, ensemble=2, max_epochs=2, hidden=[8, 8]).model
+    state = model.state_dict()
+    net = {k: v for k, v in state["net"].items() if not k.startswith("members.")}
+    for m in range(2):
+        for i, index in enumerate(["0", "2", "4.out"]):  # Linear, ReLU, Linear, ReLU, head
+            net[f"members.{m}.{index}.weight"] = state["net"][f"members.weights.{i}"][m].T.clone()
+            net[f"members.{m}.{index}.bias"] = state["net"][f"members.biases.{i}"][m, 0].clone()
+    fresh = api.fit_posterior_model("mdnn", theta, x, components=2, ensemble=2, max_epochs=1, hidden=[8, 8],
+                                    seed=1).model
+    fresh.load_state_dict({**state, "net": net})
+    points = torch.randn(20, 2, dtype=torch.float64)
+    x_obs = torch.tensor([0.5, 0.2, -0.4])
+    torch.testing.assert_close(fresh.conditional(x_obs).log_prob(points), model.conditional(x_obs).log_prob(points))

@@ -59,6 +59,9 @@ class TrainConfig:
             raise ConfigError("weight_decay must be >= 0")
 
 
+# a density network's batches are small matrices: on a 16-core CPU, 16 torch threads trained an ensemble of three
+# 1.6 times slower than 8, and one network no faster (docs/benchmarks.md)
+CPU_TRAINING_THREADS = 8
 _ROUNDING = 1e-6  # a column whose spread is below this share of its size differs by float32 rounding only
 
 
@@ -226,6 +229,18 @@ def train_density(
     and the step when the loss or a gradient becomes non-finite. On a GPU the optimisation step is
     replayed from a CUDA graph (models/adam_steps.py).
     """
+    threads = torch.get_num_threads()
+    capped = theta.device.type == "cpu" and threads > CPU_TRAINING_THREADS
+    if capped:
+        torch.set_num_threads(CPU_TRAINING_THREADS)
+    try:
+        return _train(net, nll, theta, x, val_idx, train_idx, cfg, seed=seed, label=label, on_epoch=on_epoch)
+    finally:
+        if capped:
+            torch.set_num_threads(threads)
+
+
+def _train(net, nll, theta, x, val_idx, train_idx, cfg, *, seed, label, on_epoch) -> dict:
     from tqdm.auto import tqdm
 
     g = torch.Generator().manual_seed(seed)

@@ -22,7 +22,7 @@ from torch import nn
 from ..data_files import data_class
 from ..errors import ConfigError
 from .base import Standardizer, TrainConfig
-from .mdnn import ACTIVATIONS, MDNN, MixtureHead, input_projection
+from .mdnn import ACTIVATIONS, MDNN, MemberNetworks, MixtureHead, input_projection
 from .spread import SpreadScale
 
 # kernel name -> degrees of freedom of the Student-t spectral density (None: Gaussian, the RBF)
@@ -95,17 +95,13 @@ class MDRFF(MDNN):
         with torch.no_grad():
             self.feature_in_dim = self.embedding(torch.zeros(2, x_dim if self.projection is None else theta_dim)).shape[-1]
         self.rff = RandomFourierFeatures(self.feature_in_dim, cfg.features)
-        layers, width = [], cfg.features
-        for h in cfg.hidden:
-            layers += [nn.Linear(width, h), ACTIVATIONS[cfg.activation]()]
-            width = h
         # MDNN's loss and conditioning with one member behind the (embedding, random features) front
         self.embedding = nn.Sequential(self.embedding, self.rff)
-        self.members = nn.ModuleList([nn.Sequential(*layers, MixtureHead(width, theta_dim, cfg.components,
-                                                                         cfg.covariance == "full"))])
+        self.head = MixtureHead(theta_dim, cfg.components, cfg.covariance == "full")
+        self.members = MemberNetworks(1, cfg.features, cfg.hidden, ACTIVATIONS[cfg.activation], self.head.width)
         self.x_norm, self.theta_norm, self.spread = Standardizer(x_dim), Standardizer(theta_dim), SpreadScale(theta_dim)
-        self.net = nn.ModuleDict({"embedding": self.embedding, "members": self.members, "x_norm": self.x_norm,
-                                  "theta_norm": self.theta_norm, "spread": self.spread,
+        self.net = nn.ModuleDict({"embedding": self.embedding, "members": self.members, "head": self.head,
+                                  "x_norm": self.x_norm, "theta_norm": self.theta_norm, "spread": self.spread,
                                   **({} if self.projection is None else {"projection": self.projection})})
 
     def fit(self, theta: torch.Tensor, x: torch.Tensor, *, seed: int, label: str = "", on_epoch=None,

@@ -1,7 +1,7 @@
 """Posterior-model training speed: the same fit on the CPU and on a GPU, eager and from a CUDA graph.
 
     python benchmarks/model_fit.py [--models mdnn mdrff flow] [--sims 10000] [--epochs 20]
-        [--theta-dim 2] [--x-dim 6] [--batch-size 256] [--set KEY=VALUE ...] [--threads N ...]
+        [--theta-dim 2] [--x-dim 6] [--batch-size 256] [--set ensemble=1] [--threads 16 8]
 
 Synthetic pairs (x = A theta + noise) of the pipeline's default size; every fit runs exactly
 `--epochs` epochs (patience = epochs), so rows compare the same work. Rows per model: `cpu` (the

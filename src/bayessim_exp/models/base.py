@@ -59,8 +59,8 @@ class TrainConfig:
             raise ConfigError("weight_decay must be >= 0")
 
 
-# a density network's batches are small matrices: on a 16-core CPU, 16 torch threads trained an ensemble of three
-# 1.6 times slower than 8, and one network no faster (docs/benchmarks.md)
+# a density network's batches are small matrices: past 8 torch threads a 16-core CPU trained none faster
+# (docs/benchmarks.md)
 CPU_TRAINING_THREADS = 8
 _ROUNDING = 1e-6  # a column whose spread is below this share of its size differs by float32 rounding only
 

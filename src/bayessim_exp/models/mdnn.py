@@ -105,7 +105,7 @@ class MixtureHead(nn.Module):
 class MemberNetworks(nn.Module):
     """`count` networks of one shape side by side (an ensemble's members): features [N, in] -> outputs
     [count, N, out], each layer one batched product for every member. On a 16-core CPU an ensemble of three
-    trained 1.7 times as fast as three networks one after the other (docs/benchmarks.md). Each member is
+    trained 1.8 times as fast as three networks one after the other (docs/benchmarks.md). Each member is
     initialised as nn.Linear layers would be, member after member, layer after layer (the draws of a
     ModuleList of nn.Sequential members, whose states `MDNN.load_state_dict` still reads)."""
 

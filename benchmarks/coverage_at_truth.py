@@ -4,9 +4,12 @@ truth's summaries lie among the model's training inputs (diagnostics/extrapolati
 
     PYTHONPATH=src python benchmarks/coverage_at_truth.py outputs/<run>/<date> --round 1 --sims 200
     PYTHONPATH=src python benchmarks/coverage_at_truth.py RUN --refit model.project_inputs=false   # another model
+    PYTHONPATH=src python benchmarks/coverage_at_truth.py RUN --round 2 --refit model.ensemble=3 --train-rounds 2
 
 `--refit OVERRIDE...` fits the run's model with those overrides (on the training simulations of rounds 1 to
---round, pooled as the run's truncated rounds are) instead of loading the round's own, and checks that one.
+--round, pooled as the run's truncated rounds are, or of the rounds `--train-rounds` names) instead of loading the
+round's own, and checks that one; as the pipeline does, its spread is calibrated on the last of those rounds' pairs
+(`--calibrate-on all`: on every round's).
 
 Held-out coverage averages over the proposal; a Bayesian posterior need not cover every fixed truth, but a
 model calibrated over the prior that misses one truth this often extrapolates there (docs/statistics.md, "Real
@@ -52,11 +55,12 @@ def fitted_space(method: BayesSim, theta: torch.Tensor) -> torch.Tensor:
     return theta if method.probit is None else method.probit.to_probit(theta).float()
 
 
-def refit(comp, cfg, overrides: list[str], theta: torch.Tensor, x: torch.Tensor):
-    """The run's model config with `overrides`, fitted on training simulations (theta in the method's space)."""
+def refit(comp, cfg, overrides: list[str], theta: torch.Tensor, x: torch.Tensor, latest: torch.Tensor):
+    """The run's model config with `overrides`, fitted on training simulations (theta in the method's space), its
+    spread calibrated on the rows `latest`."""
     model_cfg = OmegaConf.merge(cfg.model, OmegaConf.from_dotlist([o.removeprefix("model.") for o in overrides]))
     model = registry.build("model", model_cfg, theta_dim=comp.task.spec.dim, x_dim=comp.x_dim)
-    model.fit(theta, x, seed=0, label="refit")
+    model.fit(theta, x, seed=0, label="refit", calibration_rows=latest)
     return model
 
 
@@ -67,19 +71,30 @@ def main() -> None:
     ap.add_argument("--sims", type=int, default=200, help="trajectories at the truth and prior draws")
     ap.add_argument("--seed", type=int, default=123)
     ap.add_argument("--refit", nargs="+", metavar="OVERRIDE", help="model overrides to fit instead (model.name=...)")
+    ap.add_argument("--train-rounds", nargs="+", type=int, metavar="ROUND",
+                    help="the rounds whose simulations --refit trains on (default: 1 to --round)")
+    ap.add_argument("--calibrate-on", choices=["last", "all"], default="last",
+                    help="the pairs --refit calibrates its spread on: the last training round's (as the pipeline) or all")
     args = ap.parse_args()
+    train_rounds = args.train_rounds or list(range(1, args.round + 1))
+    if args.train_rounds and not args.refit:
+        raise SystemExit("--train-rounds chooses what --refit trains on: give --refit as well")
+    if not all(1 <= k <= args.round for k in train_rounds):
+        raise SystemExit(f"--train-rounds {train_rounds}: rounds 1 to --round {args.round} only")
     cfg = OmegaConf.load(args.run / "config.yaml")
     comp = build_components(cfg, check_run_config(cfg))
     if comp.real.true_params is None:
         raise SystemExit(f"{args.run}: the run's real data carry no true parameters")
     method = build_method(cfg, comp, comp.policy)
     ctx = RoundContext(RunDir(args.run), args.round, comp.rc.seed, None)
-    summaries = [ctx.output("summarize", k) for k in range(1, args.round + 1)]
+    summaries = [ctx.output("summarize", k) for k in train_rounds]
     cut = [len(s["x"]) - int(comp.rc.diagnostics.held_out_fraction * len(s["x"])) for s in summaries]
     theta_train = fitted_space(method, torch.cat([s["theta"][:c] for s, c in zip(summaries, cut)]))
     x_train = torch.cat([s["x"][:c] for s, c in zip(summaries, cut)])
     if args.refit:
-        model = refit(comp, cfg, args.refit, theta_train, x_train)
+        latest = torch.zeros(len(x_train), dtype=torch.bool)
+        latest[len(x_train) - cut[-1] if args.calibrate_on == "last" else 0:] = True
+        model = refit(comp, cfg, args.refit, theta_train, x_train, latest)
     else:
         model = comp.model()
         model.load_state_dict(ctx.output("fit")["model"])
@@ -92,7 +107,8 @@ def main() -> None:
         outside = inputs_outside(model.inputs(x_truth), model.inputs(x_train), theta_train,
                                  model.inputs(summaries[-1]["x"][cut[-1]:]), 0.01)
     distances = torch.tensor(outside["distance"])
-    label = " ".join(args.refit) if args.refit else "the run's"
+    label = (" ".join(args.refit) + f", trained on rounds {train_rounds}, calibrated on {args.calibrate_on}"
+             if args.refit else "the run's")
     print(f"| run | round | model | trajectories | at the truth: 50 % / 90 % | prior draws: 50 % / 90 % | truth's summaries: "
           f"median distance (held-out median), share with p < 0.01 |\n|---|---|---|---|---|---|---|\n"
           f"| {args.run} | {args.round} | {label} | {len(x_truth)} | {at_truth['0.5']:.2f} / {at_truth['0.9']:.2f} | "

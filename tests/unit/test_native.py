@@ -69,7 +69,7 @@ def test_summarize_drops_and_counts_diverged_simulations(tmp_path, monkeypatch):
     cfg = BayesSimConfig(proposal="prior", finetune=True, max_components=50, parameter_space="box",
                          combination="product", replay_tempering=True, on_guard="fallback",
                          importance_draws=100_000, escape="nearest", integrators=["model"],
-                         summary_error="replays")
+                         summary_error="replays", calibrate_on="latest")
     out = BayesSim(cfg, inputs).summarize(ctx)
     assert out["diverged"] == 2
     assert out["theta"].squeeze(1).tolist() == [10.0, 100.0]

@@ -48,7 +48,7 @@ from .set_calibration import SetPosteriors, set_importance_draws, simulated_sets
 from .simulate import predictive_summaries, simulate_as_driven, without_noise
 from .summary_error import MODES as SUMMARY_ERRORS
 from .summary_error import SummaryError
-from .training_data import exact_training_rows, held_out_count, split, summarized
+from .training_data import calibration_rows, exact_training_rows, held_out_count, split, summarized
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +66,7 @@ class BayesSimConfig:
     importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
     integrators: Any  # auto or a list: the integrators inputs.sims alternate between (components.build_method)
     summary_error: str  # replays | none: noise on simulated summaries where the replays leave features unexplained
+    calibrate_on: str  # latest | all: the pooled rounds' validation pairs the model's spread is calibrated on
 
     def validate(self) -> None:
         if self.parameter_space not in PARAMETER_SPACES:
@@ -82,6 +83,8 @@ class BayesSimConfig:
         check_integrators(self.integrators)
         if self.summary_error not in SUMMARY_ERRORS:
             raise ConfigError(f"summary_error={self.summary_error!r} not allowed; allowed: {', '.join(SUMMARY_ERRORS)}")
+        if self.calibrate_on not in ("latest", "all"):
+            raise ConfigError(f"calibrate_on={self.calibrate_on!r} not allowed; allowed: latest, all")
         if self.importance_draws < 1000:
             raise ConfigError(f"importance_draws must be >= 1000 (the importance-sampled posterior's base draws), "
                               f"got {self.importance_draws}")
@@ -176,15 +179,12 @@ class BayesSim(InferenceMethod):
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
         # trained on the run's device (summaries are stored on the CPU; with device=cuda they are copied there)
         dev = self.inputs.device
-        # the spread is calibrated on the latest round's pairs, drawn like the pairs the posterior is used on:
-        # one factor per parameter fitted to rounds pooled from several proposals would fit the wide early ones
-        latest = torch.zeros(len(theta), dtype=torch.bool)
-        latest[len(theta) - len(data[-1][0]):] = True
+        calibrated = calibration_rows(len(theta), len(data[-1][0]), self.cfg.calibrate_on)
         # simulations replayed as the real data were driven are kept for the calibration alone
         fraction = self.inputs.rc.diagnostics.held_out_fraction
         exact = torch.cat([exact_training_rows(ctx.output("summarize", k), fraction) for k in self._fitted_rounds(ctx)])
-        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=latest,
-                            calibration_only=exact if bool((exact & latest).any()) else None)
+        history = model.fit(theta.to(dev), x.to(dev), seed=ctx.seed, label=f"round {r}", calibration_rows=calibrated,
+                            calibration_only=exact if bool((exact & calibrated).any()) else None)
         ctx.tb.losses(r, history)
         theta_val, x_val = data[-1][2], data[-1][3]
         d = self.inputs.rc.diagnostics

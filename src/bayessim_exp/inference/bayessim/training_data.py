@@ -37,3 +37,13 @@ def exact_training_rows(summary: dict, fraction: float) -> torch.Tensor:
     n = len(summary["theta"])
     exact = summary.get("exact", torch.zeros(n, dtype=torch.bool))  # absent from rounds summarized before
     return exact[: n - held_out_count(n, fraction)]
+
+
+def calibration_rows(total: int, latest: int, calibrate_on: str) -> torch.Tensor:
+    """[total] bool: the pooled training rows the model's spread is calibrated on, the last `latest` being the latest
+    round's. latest: the latest round's pairs, drawn like the pairs the posterior is used on (one factor per parameter
+    fitted to rounds pooled from several proposals would fit the wide early ones); all: every round's
+    (docs/benchmarks.md: where the latest round's pairs miss the truth)."""
+    rows = torch.zeros(total, dtype=torch.bool)
+    rows[total - latest if calibrate_on == "latest" else 0:] = True
+    return rows

@@ -5,11 +5,15 @@ truth's summaries lie among the model's training inputs (diagnostics/extrapolati
     PYTHONPATH=src python benchmarks/coverage_at_truth.py outputs/<run>/<date> --round 1 --sims 200
     PYTHONPATH=src python benchmarks/coverage_at_truth.py RUN --refit model.project_inputs=false   # another model
     PYTHONPATH=src python benchmarks/coverage_at_truth.py RUN --round 2 --refit model.ensemble=3 --train-rounds 2
+    PYTHONPATH=src python benchmarks/coverage_at_truth.py RUN --round 2 --per-parameter
 
 `--refit OVERRIDE...` fits the run's model with those overrides (on the training simulations of rounds 1 to
 --round, pooled as the run's truncated rounds are, or of the rounds `--train-rounds` names) instead of loading the
 round's own, and checks that one; as the pipeline does, its spread is calibrated on the last of those rounds' pairs
-(`--calibrate-on all`: on every round's).
+(`--calibrate-on all`: on every round's). `--per-parameter` adds a table: per parameter, the truth in the space
+the model is fitted in (probit: prior quantiles as standard normal scores), and over the trajectories at the truth
+the mean and root-mean-square of (q's mean - truth) / q's standard deviation and q's mean standard deviation (q:
+the model's conditional alone, before the proposal's truncation).
 
 Held-out coverage averages over the proposal; a Bayesian posterior need not cover every fixed truth, but a
 model calibrated over the prior that misses one truth this often extrapolates there (docs/statistics.md, "Real
@@ -51,6 +55,21 @@ def coverage(comp: Components, method: BayesSim, ctx: RoundContext, model, theta
     return {f"{level:g}": float((levels < level).double().mean()) for level in (0.5, 0.9)}, x[kept]
 
 
+def per_parameter(model, method: BayesSim, names: list[str], truth: torch.Tensor, x: torch.Tensor) -> str:
+    """Per parameter, q's error at the truth over the trajectories x in standard deviations, and q's spread."""
+    at = fitted_space(method, truth[None]).double()[0]
+    errors, spreads = [], []
+    for x_i in x:
+        q = model.conditional(x_i.float())
+        errors.append((q.mean.double() - at) / q.stddev.double())
+        spreads.append(q.stddev.double())
+    z, spread = torch.stack(errors), torch.stack(spreads)
+    rows = [f"| {n} | {at[i]:+.2f} | {z[:, i].mean():+.2f} | {z[:, i].pow(2).mean().sqrt():.2f} | {spread[:, i].mean():.3f} |"
+            for i, n in enumerate(names)]
+    return "\n".join(["| parameter | truth, fitted space | mean error / std | rms error / std | q's std |",
+                      "|---|---:|---:|---:|---:|", *rows])
+
+
 def fitted_space(method: BayesSim, theta: torch.Tensor) -> torch.Tensor:
     return theta if method.probit is None else method.probit.to_probit(theta).float()
 
@@ -75,6 +94,7 @@ def main() -> None:
                     help="the rounds whose simulations --refit trains on (default: 1 to --round)")
     ap.add_argument("--calibrate-on", choices=["last", "all"], default="last",
                     help="the pairs --refit calibrates its spread on: the last training round's (as the pipeline) or all")
+    ap.add_argument("--per-parameter", action="store_true", help="also q's error at the truth per parameter")
     args = ap.parse_args()
     train_rounds = args.train_rounds or list(range(1, args.round + 1))
     if args.train_rounds and not args.refit:
@@ -114,6 +134,9 @@ def main() -> None:
           f"| {args.run} | {args.round} | {label} | {len(x_truth)} | {at_truth['0.5']:.2f} / {at_truth['0.9']:.2f} | "
           f"{at_prior['0.5']:.2f} / {at_prior['0.9']:.2f} | {float(distances.median()):.1f} "
           f"({outside['held_out_median']:.1f}), {sum(p < 0.01 for p in outside['p_value']) / len(distances):.2f} |")
+
+    if args.per_parameter:
+        print(per_parameter(model, method, comp.task.spec.names, truth, x_truth))
 
 
 if __name__ == "__main__":

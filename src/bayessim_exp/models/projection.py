@@ -54,7 +54,7 @@ class RidgeSystem:
         shifted.diagonal().add_(penalty)
         # positive definite for any penalty > 0: Cholesky, half the work of a general solve
         factor = torch.linalg.cholesky(shifted)
-        del shifted
+        del shifted  # rows^2 doubles, not kept through the solve
         z_mean, y_mean = z.mean(0), y.mean(0)
         alpha = torch.cholesky_solve(y - y_mean, factor)
         w = z.T @ alpha - z_mean[:, None] * alpha.sum(0)  # (z - mean)^T alpha without the centred copy of z
@@ -62,7 +62,7 @@ class RidgeSystem:
 
     def _centred_kernel(self, leave_out: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """(z, y, (z - mean)(z - mean)^T) of the rows kept, the kernel kept for the next solve on the same rows
-        (penalties are tried on one split: forming it took twice a Cholesky's time, docs/benchmarks.md)."""
+        (every penalty is tried on one split: its centring passes over rows^2 doubles several times)."""
         cached = self._kernel_of
         if cached is not None and (cached[0] is None if leave_out is None
                                    else cached[0] is not None and torch.equal(cached[0], leave_out)):

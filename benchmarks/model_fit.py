@@ -7,7 +7,8 @@ Synthetic pairs (x = A theta + noise) of the pipeline's default size; every fit 
 `--epochs` epochs (patience = epochs), so rows compare the same work. Rows per model: `cpu` (the
 baseline, the machine's torch threads), `cuda eager` (one kernel launch at a time) and `cuda graph`
 (the step replayed from a CUDA graph, what the pipeline does with device=cuda); with `--threads`, one
-`cpu` row per torch thread count (the first is the baseline). `--set` overrides the models' config
+`cpu` row per torch thread count (the first is the baseline; training uses at most
+models/base.CPU_TRAINING_THREADS of them, which the row names). `--set` overrides the models' config
 (`--set ensemble=3 covariance=full components=1`: the mission's ShadowHand model). Mixture models (mdnn,
 mdrff) get a `matrix loss` row per device as well: the loss by autograd through the assembled precision
 factors (`mixture_nll`) instead of the head's loss with its written-out gradient (`HeadNLL`).
@@ -70,7 +71,9 @@ def main() -> None:
     # training steps only: the spread calibration after them (mixtures) is not an epoch's cost
     cfg = {**overrides, "max_epochs": args.epochs, "patience": args.epochs, "batch_size": args.batch_size,
            "calibrate": False}
-    variants = [(f"cpu, {n} threads" if len(args.threads) > 1 else "cpu", "cpu", False, n) for n in args.threads]
+    cap = base.CPU_TRAINING_THREADS
+    variants = [(f"cpu, {n} threads" + (f" ({cap} train)" if n > cap else "") if len(args.threads) > 1 else "cpu",
+                 "cpu", False, n) for n in args.threads]
     if torch.cuda.is_available():
         cpu_threads = args.threads[0]
         variants += [("cuda eager", "cuda", False, cpu_threads), ("cuda graph", "cuda", True, cpu_threads)]

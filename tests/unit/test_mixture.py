@@ -126,4 +126,5 @@ def test_a_diagonal_mixture_s_density_is_the_multivariate_normals_near_its_compo
                         3 * torch.randn(5, d, dtype=torch.float64, generator=g)])
     reference = torch.stack([torch.distributions.MultivariateNormal(m, torch.diag(s**2)).log_prob(points)
                              for m, s in zip(means, std)], -1)
+    assert mix.diagonal_std is not None  # the elementwise path
     torch.testing.assert_close(mix.component_log_prob(points), reference, rtol=1e-10, atol=1e-6)

@@ -6,6 +6,7 @@ truncated to the prior's support (`TruncatedMixture`), renormalised rather than 
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 
@@ -99,6 +100,12 @@ class GaussianMixture(ParameterDistribution):
     def num_components(self) -> int:
         return self.means.shape[0]
 
+    @functools.cached_property
+    def diagonal_std(self) -> torch.Tensor | None:
+        """The components' standard deviations [K, D] where every covariance is diagonal (a diagonal model's
+        posteriors: densities and draws elementwise, D per point instead of D^2), else None."""
+        return torch.diagonal(self.scale_tril, dim1=-2, dim2=-1) if is_diagonal(self.scale_tril) else None
+
     def gaussian_factor(self) -> tuple[torch.Tensor, torch.Tensor] | str:
         return (self.means[0], self.covs[0]) if self.num_components == 1 else NOT_GAUSSIAN
 
@@ -114,7 +121,7 @@ class GaussianMixture(ParameterDistribution):
         flat = theta.double().reshape(-1, self.dim)
         std = torch.diagonal(self.scale_tril, dim1=-2, dim2=-1)  # [K, D]
         half_logdet = torch.log(std).sum(-1)
-        if is_diagonal(self.scale_tril):
+        if self.diagonal_std is not None:
             # a diagonal model's posteriors: K D per point, not K D^2, expanded into three matrix products; centred on
             # the components' mean first, so the expansion cancels only where the points are far from every component
             centre = self.means.mean(0)

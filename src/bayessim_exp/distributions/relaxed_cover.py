@@ -31,7 +31,7 @@ import math
 
 import torch
 
-from .mixture import GaussianMixture, is_diagonal
+from .mixture import GaussianMixture
 
 # the tilts tried: log B_k(beta) is convex in beta (a log-partition function minus a linear term), so the best of a
 # fine grid is within a few per cent of the best acceptance
@@ -71,7 +71,7 @@ class RelaxedCover:
         self.tilted_chol = tilted_chol
         # a diagonal model's posterior (its products and tempering stay diagonal): every step elementwise, K D per
         # candidate instead of K D^2 (ShadowHand_more's 102 parameters and 50 components: docs/benchmarks.md)
-        self.diagonal = is_diagonal(mixture.scale_tril)
+        self.diagonal = mixture.diagonal_std is not None
 
     def _log_accept(self, u: torch.Tensor) -> torch.Tensor:
         if self.diagonal:

@@ -48,7 +48,7 @@ from .set_calibration import SetPosteriors, set_importance_draws, simulated_sets
 from .simulate import predictive_summaries, simulate_as_driven, without_noise
 from .summary_error import MODES as SUMMARY_ERRORS
 from .summary_error import SummaryError
-from .training_data import calibration_rows, exact_training_rows, held_out_count, split, summarized
+from .training_data import CALIBRATE_ON, calibration_rows, exact_training_rows, held_out_count, split, summarized
 
 log = logging.getLogger(__name__)
 
@@ -83,8 +83,8 @@ class BayesSimConfig:
         check_integrators(self.integrators)
         if self.summary_error not in SUMMARY_ERRORS:
             raise ConfigError(f"summary_error={self.summary_error!r} not allowed; allowed: {', '.join(SUMMARY_ERRORS)}")
-        if self.calibrate_on not in ("latest", "all"):
-            raise ConfigError(f"calibrate_on={self.calibrate_on!r} not allowed; allowed: latest, all")
+        if self.calibrate_on not in CALIBRATE_ON:
+            raise ConfigError(f"calibrate_on={self.calibrate_on!r} not allowed; allowed: {', '.join(CALIBRATE_ON)}")
         if self.importance_draws < 1000:
             raise ConfigError(f"importance_draws must be >= 1000 (the importance-sampled posterior's base draws), "
                               f"got {self.importance_draws}")

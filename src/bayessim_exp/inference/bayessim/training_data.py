@@ -39,6 +39,9 @@ def exact_training_rows(summary: dict, fraction: float) -> torch.Tensor:
     return exact[: n - held_out_count(n, fraction)]
 
 
+CALIBRATE_ON = ("latest", "all")  # method.calibrate_on's choices
+
+
 def calibration_rows(total: int, latest: int, calibrate_on: str) -> torch.Tensor:
     """[total] bool: the pooled training rows the model's spread is calibrated on, the last `latest` being the latest
     round's. latest: the latest round's pairs, drawn like the pairs the posterior is used on (one factor per parameter

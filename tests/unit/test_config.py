@@ -76,13 +76,13 @@ def test_defaults_are_written_once_in_the_yaml(compose, group, name):
 
 
 # each task's inference defaults (its YAML's defaults list; measured in docs/tasks.md)
-TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, components, ensemble
-    "Pendulum": ("start", "mdnn", "full", False, 5, 1),
-    "Cartpole": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
-    "Ant": ("corrdiff", "mdnn", "diagonal", True, 5, 1),
-    "Humanoid": ("corrdiff", "mdnn", "diagonal", True, 1, 1),
-    "ShadowHand": ("corrdiff", "mdnn", "full", True, 1, 3),
-    "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True, 5, 3),
+TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, components, ensemble, method.calibrate_on
+    "Pendulum": ("start", "mdnn", "full", False, 5, 1, "latest"),
+    "Cartpole": ("corrdiff", "mdnn", "full", True, 1, 3, "all"),  # conf/method_task/bayessim_Cartpole.yaml
+    "Ant": ("corrdiff", "mdnn", "diagonal", True, 5, 1, "latest"),
+    "Humanoid": ("corrdiff", "mdnn", "diagonal", True, 1, 1, "latest"),
+    "ShadowHand": ("corrdiff", "mdnn", "full", True, 1, 3, "latest"),
+    "ShadowHand_more": ("corrdiff", "mdnn", "diagonal", True, 5, 3, "latest"),
 }
 
 
@@ -90,8 +90,16 @@ TASK_DEFAULTS = {  # summarizer, model, covariance, project_inputs, components, 
 def test_a_task_chooses_its_inference_defaults(compose, task):
     cfg = compose([f"task={task}"])
     m = cfg.model
-    assert (cfg.summarizer.name, m.name, m.covariance, m.project_inputs, m.components, m.ensemble) == TASK_DEFAULTS[task]
+    assert (cfg.summarizer.name, m.name, m.covariance, m.project_inputs, m.components, m.ensemble,
+            cfg.method.calibrate_on) == TASK_DEFAULTS[task]
     assert cfg.method.parameter_space == "auto"
+
+
+def test_the_command_line_beats_a_tasks_method_settings_and_another_method_gets_none(compose):
+    for overrides in (["task=Cartpole", "method.calibrate_on=latest"], ["method.calibrate_on=latest", "task=Cartpole"]):
+        assert compose(overrides).method.calibrate_on == "latest"
+    assert compose(["task=Cartpole", "method=bayessim"]).method.calibrate_on == "all"
+    assert "calibrate_on" not in compose(["task=Cartpole", "method=simopt"]).method
 
 
 @pytest.mark.parametrize("override, key, value", [

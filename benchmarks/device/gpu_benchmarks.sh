@@ -42,9 +42,9 @@
 #
 #   background STEP...  the steps, started in their own process session so that they outlast this call (a warm
 #                machine keeps them running until it goes back): their logs and files go to /tmp/background_out
-#   collect      what the background steps have written so far, copied into $OUT (their logs' tails printed), and
-#                the run directories of studies under /tmp/calibration_*, tarred (results, configs, errors), with
-#                how many runs finished every round (results.json is rewritten after each); the robots step's
+#   collect      what the background steps have written so far (their logs' tails printed) and the run directories
+#                of studies under /tmp/calibration_* (results, configs, errors), with how many runs finished every
+#                round (results.json is rewritten after each), in one $OUT/collected.tar.gz; the robots step's
 #                finished jobs (their JSON, generated.json and logs) as $OUT/robots_work.tar.gz, for --resume or
 #                --render-only here
 #
@@ -264,8 +264,10 @@ fi
 BACKGROUND_OUT=/tmp/background_out
 if [ "${1:-}" = collect ] && [ $# = 1 ]; then
     for log in "$BACKGROUND_OUT"/*.log; do [ -f "$log" ] && { say "${log##*/}"; tail -n 15 "$log"; }; done
-    cp -r "$BACKGROUND_OUT"/. "$OUT"/ 2>/dev/null
-    # the finished runs of a study started with `background exec` (hydra.sweep.dir=/tmp/calibration_NAME)
+    # A call brings back at most 8 files from $OUT (the device tool's limits): everything goes into one archive,
+    # the background steps' outputs and the finished runs of each study started with `background exec`
+    # (hydra.sweep.dir=/tmp/calibration_NAME)
+    studies=()
     for dir in /tmp/calibration_*/; do
         dir=$(basename "$dir")
         [ -d "/tmp/$dir" ] || continue
@@ -273,9 +275,10 @@ if [ "${1:-}" = collect ] && [ $# = 1 ]; then
         say "$dir: $("$PY" -c "import collections, sys; from bayessim_exp.report.jobs import read_jobs
 print(', '.join(f'{n} {s}' for s, n in sorted(collections.Counter(j.status for j in read_jobs(sys.argv[1])).items())))" \
             "/tmp/$dir")"
-        (cd /tmp && tar -czf "$OUT/$dir.tar.gz" "$dir"/report "$dir"/*/results.json "$dir"/*/config.yaml \
-            "$dir"/*/.hydra "$dir"/*/error.txt 2>/dev/null)  # the calibration step's report too, when there is one
+        studies+=("$dir"/report "$dir"/*/results.json "$dir"/*/config.yaml "$dir"/*/.hydra "$dir"/*/error.txt)
     done
+    (cd /tmp && tar -czf "$OUT/collected.tar.gz" "${BACKGROUND_OUT#/tmp/}" "${studies[@]}" 2>/dev/null)
+    say "$OUT/collected.tar.gz: $(du -h "$OUT/collected.tar.gz" | cut -f1)"
     if [ -d /tmp/robots_work ]; then
         (cd /tmp/robots_work && tar -czf "$OUT/robots_work.tar.gz" logs */*.json 2>/dev/null)
         say "robots: $(ls /tmp/robots_work/*/*_seed*.json 2>/dev/null | wc -l) jobs finished or under way"

@@ -274,3 +274,19 @@ def test_tensorboard_hparams_compare_the_finished_jobs(sweep, capsys):
     assert [e.value for e in acc.Scalars("hparams/log_prob_gain")] == [2.0]
     assert [e.value for e in acc.Scalars("hparams/surrogate_real_return")] == [-200.0]
     assert not list((sweep / "3_way_s1").glob("*.hparams"))  # unfinished: no session
+
+
+def test_pool_reports_a_study_run_in_parts_as_one_configuration(tmp_path):
+    """Seeds 0-5 with device=cuda on one machine, 6-11 on the CPU of another: two configurations by their overrides,
+    one with --pool (its 12 truths counted together)."""
+    sweep = tmp_path / "sweep"
+    for seed in range(12):
+        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}", *(["device=cuda"] if seed < 6 else [])],
+                 result=truth_results(seed, [0.3, 0.4], [0.2, 0.7]))
+    build_report(sweep, posteriors=False)
+    with (sweep / "report" / "calibration.csv").open() as f:
+        assert sorted(row["truths"] for row in csv.DictReader(f)) == ["6", "6"]
+    assert main([str(sweep), "--no-posteriors", "--pool"]) == 0
+    with (sweep / "report" / "calibration.csv").open() as f:
+        assert [row["truths"] for row in csv.DictReader(f)] == ["12"]
+    assert "12 truths (drawn from the prior)" in (sweep / "report" / "report.md").read_text()

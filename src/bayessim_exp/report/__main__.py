@@ -1,4 +1,4 @@
-"""`python -m bayessim_exp.report <sweep dir> [--out DIR] [--no-posteriors]`: tables and plots of a sweep."""
+"""`python -m bayessim_exp.report <sweep dir> [--out DIR] [--no-posteriors] [--pool]`: tables and plots of a sweep."""
 
 import argparse
 import sys
@@ -12,9 +12,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("sweep_dir", help="a --multirun sweep dir (or one run dir)")
     parser.add_argument("--out", default=None, help="where to write the report (default: <sweep dir>/report)")
     parser.add_argument("--no-posteriors", action="store_true", help="skip the posterior pair plots")
+    parser.add_argument("--pool", action="store_true",
+                        help="one configuration for every job: a study run in parts whose overrides differ only in "
+                             "where they ran (device=cuda on one machine, the CPU on another); link the parts' job "
+                             "dirs into one folder")
     args = parser.parse_args(argv)
     try:
-        report = build_report(args.sweep_dir, args.out, posteriors=not args.no_posteriors)
+        report = build_report(args.sweep_dir, args.out, posteriors=not args.no_posteriors, pool=args.pool)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -55,14 +55,15 @@ def _write_csv(path: Path, header: list[str], rows: list[list]) -> None:
         writer.writerows(rows)
 
 
-def build_report(sweep_dir: str | Path, out_dir: str | Path | None = None, posteriors: bool = True) -> Report:
+def build_report(sweep_dir: str | Path, out_dir: str | Path | None = None, posteriors: bool = True,
+                 pool: bool = False) -> Report:
     sweep_dir = Path(sweep_dir)
     jobs = read_jobs(sweep_dir)
     if not jobs:
         raise FileNotFoundError(f"no job dirs under {sweep_dir} (looked for results.json, .hydra/ or error.txt)")
     out = Path(out_dir) if out_dir is not None else sweep_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
-    labels = configuration_labels(jobs)
+    labels = configuration_labels(jobs, pool)
     finished = [j for j in jobs if j.status == "finished"]
     per_job = {j.path: job_metrics(j.results) for j in finished}
     metrics = metrics_present(list(per_job.values()))

@@ -118,9 +118,12 @@ def read_jobs(sweep_dir: str | Path) -> list[Job]:
     return [read_job(p) for p in find_job_dirs(sweep_dir)]
 
 
-def configuration_labels(jobs: list[Job]) -> dict[Path, str]:
+def configuration_labels(jobs: list[Job], pool: bool = False) -> dict[Path, str]:
     """A label per job naming what sets its configuration apart: its overrides without the seed
-    and without those every job shares (from results.json's components when there are none)."""
+    and without those every job shares (from results.json's components when there are none);
+    `pool`: one label for all, a study whose parts ran elsewhere (other machines, devices)."""
+    if pool:
+        return {job.path: "pooled" for job in jobs}
     keyed = {}
     for job in jobs:
         items = [o for o in job.overrides if _override_key(o) != "seed" and not _override_key(o).startswith("hydra.")]

@@ -16,8 +16,9 @@
 #    the others leave.
 # Logs go to $OUT (gpu_benchmarks.sh's background folder); each study's run directories to
 # /tmp/calibration_<task>_<first> (nominal: /tmp/calibration_nominal_<task>_<first>), which `collect` tars with how
-# many runs finished. A seed is a truth: a study
-# that repeats seeds an earlier one finished measures those truths twice (docs/benchmarks.md lists the seeds run).
+# many runs finished. A seed is a truth: a study that repeats seeds an earlier one finished measures those truths
+# twice (docs/benchmarks.md lists the seeds run). Each run keeps more than its one simulation thread busy (34 runs on
+# 32 cores kept a load average near 170 on 2026-11-28): fewer JOBS than cores.
 set -u
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-$PWD/device_out}

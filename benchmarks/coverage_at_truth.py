@@ -37,6 +37,7 @@ from bayessim_exp.diagnostics.extrapolation import inputs_outside
 from bayessim_exp.distributions.hpd import own_level
 from bayessim_exp.inference.bayessim.condition import condition
 from bayessim_exp.inference.bayessim.method import BayesSim
+from bayessim_exp.inference.bayessim.training_data import CALIBRATE_ON, calibration_rows
 from bayessim_exp.run_config import check_run_config
 from bayessim_exp.stages import RoundContext
 
@@ -74,12 +75,12 @@ def fitted_space(method: BayesSim, theta: torch.Tensor) -> torch.Tensor:
     return theta if method.probit is None else method.probit.to_probit(theta).float()
 
 
-def refit(comp, cfg, overrides: list[str], theta: torch.Tensor, x: torch.Tensor, latest: torch.Tensor):
+def refit(comp, cfg, overrides: list[str], theta: torch.Tensor, x: torch.Tensor, calibrated: torch.Tensor):
     """The run's model config with `overrides`, fitted on training simulations (theta in the method's space), its
-    spread calibrated on the rows `latest`."""
+    spread calibrated on the rows `calibrated`."""
     model_cfg = OmegaConf.merge(cfg.model, OmegaConf.from_dotlist([o.removeprefix("model.") for o in overrides]))
     model = registry.build("model", model_cfg, theta_dim=comp.task.spec.dim, x_dim=comp.x_dim)
-    model.fit(theta, x, seed=0, label="refit", calibration_rows=latest)
+    model.fit(theta, x, seed=0, label="refit", calibration_rows=calibrated)
     return model
 
 
@@ -92,8 +93,9 @@ def main() -> None:
     ap.add_argument("--refit", nargs="+", metavar="OVERRIDE", help="model overrides to fit instead (model.name=...)")
     ap.add_argument("--train-rounds", nargs="+", type=int, metavar="ROUND",
                     help="the rounds whose simulations --refit trains on (default: 1 to --round)")
-    ap.add_argument("--calibrate-on", choices=["last", "all"], default="last",
-                    help="the pairs --refit calibrates its spread on: the last training round's (as the pipeline) or all")
+    ap.add_argument("--calibrate-on", choices=CALIBRATE_ON, default="latest",
+                    help="the pairs --refit calibrates its spread on: the last training round's (as the pipeline, "
+                         "method.calibrate_on) or all")
     ap.add_argument("--per-parameter", action="store_true", help="also q's error at the truth per parameter")
     args = ap.parse_args()
     train_rounds = args.train_rounds or list(range(1, args.round + 1))
@@ -112,9 +114,8 @@ def main() -> None:
     theta_train = fitted_space(method, torch.cat([s["theta"][:c] for s, c in zip(summaries, cut)]))
     x_train = torch.cat([s["x"][:c] for s, c in zip(summaries, cut)])
     if args.refit:
-        latest = torch.zeros(len(x_train), dtype=torch.bool)
-        latest[len(x_train) - cut[-1] if args.calibrate_on == "last" else 0:] = True
-        model = refit(comp, cfg, args.refit, theta_train, x_train, latest)
+        calibrated = calibration_rows(len(x_train), cut[-1], args.calibrate_on)
+        model = refit(comp, cfg, args.refit, theta_train, x_train, calibrated)
     else:
         model = comp.model()
         model.load_state_dict(ctx.output("fit")["model"])

@@ -3,8 +3,8 @@
 import pytest
 
 from bayessim_exp.errors import ConfigError
-from bayessim_exp.inference.bayessim.method import BayesSimConfig
 from bayessim_exp.inference.bayessim.training_data import calibration_rows
+from bayessim_exp.pipeline import Pipeline
 
 
 def test_the_spread_is_calibrated_on_the_latest_round_s_rows_or_on_every_round_s():
@@ -14,9 +14,6 @@ def test_the_spread_is_calibrated_on_the_latest_round_s_rows_or_on_every_round_s
     assert calibration_rows(4, 4, "latest").all()  # round 1: its own rows are every row
 
 
-def test_an_unknown_calibrate_on_is_refused():
-    cfg = BayesSimConfig(proposal="prior", finetune=True, max_components=50, parameter_space="box",
-                         combination="product", replay_tempering=True, on_guard="fallback", importance_draws=100_000,
-                         escape="nearest", integrators=["model"], summary_error="replays", calibrate_on="first")
+def test_an_unknown_calibrate_on_is_refused_before_any_compute(compose, tmp_path):
     with pytest.raises(ConfigError, match="calibrate_on='first' not allowed; allowed: latest, all"):
-        cfg.validate()
+        Pipeline(compose(["method.calibrate_on=first"]), tmp_path)

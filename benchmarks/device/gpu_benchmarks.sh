@@ -311,7 +311,9 @@ if [ "${1:-}" = collect ] && [ $# = 1 ]; then
         say "$dir: $("$PY" -c "import collections, sys; from bayessim_exp.report.jobs import read_jobs
 print(', '.join(f'{n} {s}' for s, n in sorted(collections.Counter(j.status for j in read_jobs(sys.argv[1])).items())))" \
             "/tmp/$dir")"
-        studies+=("$dir"/report "$dir"/*/results.json "$dir"/*/config.yaml "$dir"/*/.hydra "$dir"/*/error.txt)
+        # the globs expand in /tmp, where tar runs: expanded here they matched nothing and the runs stayed behind
+        mapfile -t -O "${#studies[@]}" studies < <(cd /tmp && shopt -s nullglob && printf '%s\n' "$dir"/report \
+            "$dir"/*/results.json "$dir"/*/config.yaml "$dir"/*/.hydra "$dir"/*/error.txt)
     done
     (cd /tmp && tar -czf "$OUT/collected.tar.gz" "${BACKGROUND_OUT#/tmp/}" "${studies[@]}" 2>/dev/null)
     say "$OUT/collected.tar.gz: $(du -h "$OUT/collected.tar.gz" | cut -f1)"

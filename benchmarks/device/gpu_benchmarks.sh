@@ -12,11 +12,11 @@
 #   suite        make test's CPU lane (-m "not mjx") on the machine's CPUs, $SUITE_JOBS workers (default 8), run alone:
 #                beside the real-robot studies on 2026-11-27 the load average passed 300 (issue 45)
 #   model_fit    python benchmarks/model_fit.py --epochs 10
-#   studies      benchmarks/device/trust_studies.sh's studies of $STUDIES (ROUND_JOBS default 0) started in their own
-#                process group and left running
-#   missions     issue 45's table: the mission's command and ShadowHand_more's default run (default_run.py), each once
-#                cold, then each timed alone with the studies of `studies` stopped (SIGSTOP) meanwhile; the runs'
-#                results.json and the timings' JSON into $OUT
+#   studies      benchmarks/device/trust_studies.sh's studies of $STUDIES (ROUND_JOBS default 0), left running in the
+#                background after the step (after `missions`: runs beside them are no timings)
+#   missions     issue 45's table: the mission's command, a cold run then a timed one, and ShadowHand_more's default
+#                run twice (its first run after the mission's, then warm), on the first GPU; results.json of each run
+#                and the timings' JSON into $OUT
 #   default_run  python benchmarks/default_run.py: `device=cuda` ($REPS timed runs after one warm-up), then
 #                `device=cpu sim=native` (one run)
 #   throughput   python benchmarks/sim_throughput.py, Pendulum and Cartpole at 131,072 environments
@@ -251,34 +251,21 @@ step_robots() {
     return $rc
 }
 
-step_studies() {  # not waited for: `missions` pauses them while it times, `collect` brings their runs back
-    # under nice: the cold runs of `missions` beside them compile first
-    OMP_NUM_THREADS=1 ROUND_JOBS=${ROUND_JOBS:-0} nice -n 5 setsid bash benchmarks/device/trust_studies.sh \
+step_studies() {  # not waited for: `collect` brings their runs back
+    OMP_NUM_THREADS=1 ROUND_JOBS=${ROUND_JOBS:-0} setsid bash benchmarks/device/trust_studies.sh \
         >"$OUT/trust_studies.log" 2>&1 </dev/null &
-    echo $! >/tmp/studies.pgid  # setsid made it the leader of its own process group
-    echo "trust studies started (pid $(cat /tmp/studies.pgid)): ${STUDIES:-the default of trust_studies.sh}"
+    echo "trust studies started: ${STUDIES:-the default of trust_studies.sh}"
 }
 
-step_missions() {
-    local gpus last pgid='' f
-    gpus=$(nvidia-smi -L | wc -l)
-    last=$((gpus - 1))
-    local mission=(task=ShadowHand summarizer=signatory device=cuda) more=(task=ShadowHand_more device=cuda)
-    # cold, one after the other (they compile the same MuJoCo Warp kernels into one cache), each on its own GPU
-    CUDA_VISIBLE_DEVICES=0 "$PY" benchmarks/default_run.py --reps 1 --warmup 0 --keep /tmp/runs_cold \
-        --json "$OUT/mission_cold.json" --variant mission_cold "${mission[@]}"
-    CUDA_VISIBLE_DEVICES=$last "$PY" benchmarks/default_run.py --reps 1 --warmup 0 --keep /tmp/runs_cold_more \
-        --json "$OUT/more_cold.json" --variant more_cold "${more[@]}"
-    # timed alone: the studies' processes stopped meanwhile (their own stage seconds then include the pause)
-    [ -f /tmp/studies.pgid ] && pgid=$(cat /tmp/studies.pgid) && kill -STOP -- "-$pgid" && echo "studies paused"
-    sleep 5
-    CUDA_VISIBLE_DEVICES=0 "$PY" benchmarks/default_run.py --reps 1 --warmup 0 --keep /tmp/runs_mission \
+step_missions() {  # alone on the machine: beside 23 study runs the mission's cold run took 364 s (156 s alone)
+    local f mission=(task=ShadowHand summarizer=signatory device=cuda)
+    CUDA_VISIBLE_DEVICES=0 "$PY" benchmarks/default_run.py --reps 1 --warmup 1 --keep /tmp/runs_mission \
         --json "$OUT/mission.json" --variant mission "${mission[@]}"
-    CUDA_VISIBLE_DEVICES=0 "$PY" benchmarks/default_run.py --reps 1 --warmup 0 --keep /tmp/runs_more \
-        --json "$OUT/more.json" --variant more "${more[@]}"
-    [ -n "$pgid" ] && kill -CONT -- "-$pgid" && echo "studies resumed"
-    for f in /tmp/runs_*/*/results.json; do  # what each round proposed from and handed on
-        cp "$f" "$OUT/results_$(basename "$(dirname "$(dirname "$f")")").json"
+    # MuJoCo Warp's kernels are the mission's (the same hand); the first run compiles its own JAX traces
+    CUDA_VISIBLE_DEVICES=0 "$PY" benchmarks/default_run.py --reps 2 --warmup 0 --keep /tmp/runs_more \
+        --json "$OUT/more.json" --variant more task=ShadowHand_more device=cuda
+    for f in /tmp/runs_mission/*/results.json /tmp/runs_more/*/results.json; do  # what each round proposed and handed on
+        cp "$f" "$OUT/results_$(basename "$(dirname "$(dirname "$f")")")_$(basename "$(dirname "$f")").json"
     done
 }
 

@@ -257,7 +257,7 @@ step_studies() {  # not waited for: `collect` brings their runs back
     echo "trust studies started: ${STUDIES:-the default of trust_studies.sh}"
 }
 
-step_missions() {  # alone on the machine: beside 23 study runs the mission's cold run took 364 s (156 s alone)
+step_missions() {  # before `studies`: runs beside them slow the cold run severalfold (benchmarks/device/README.md)
     local f mission=(task=ShadowHand summarizer=signatory device=cuda)
     CUDA_VISIBLE_DEVICES=0 "$PY" benchmarks/default_run.py --reps 1 --warmup 1 --keep /tmp/runs_mission \
         --json "$OUT/mission.json" --variant mission "${mission[@]}"

@@ -9,8 +9,8 @@ truth's summaries lie among the model's training inputs (diagnostics/extrapolati
 
 `--refit OVERRIDE...` fits the run's model with those overrides (on the training simulations of rounds 1 to
 --round, pooled as the run's truncated rounds are, or of the rounds `--train-rounds` names) instead of loading the
-round's own, and checks that one; as the pipeline does, its spread is calibrated on the last of those rounds' pairs
-(`--calibrate-on all`: on every round's). `--per-parameter` adds a table: per parameter, the truth in the space
+round's own, and checks that one; as the run did, its spread is calibrated on the pairs its `method.calibrate_on`
+names (`--calibrate-on latest|all`: the last of those rounds' pairs, or every round's). `--per-parameter` adds a table: per parameter, the truth in the space
 the model is fitted in (probit: prior quantiles as standard normal scores), and over the trajectories at the truth
 the mean and root-mean-square of (q's mean - truth) / q's standard deviation and q's mean standard deviation (q:
 the model's conditional alone, before the proposal's truncation).
@@ -93,9 +93,9 @@ def main() -> None:
     ap.add_argument("--refit", nargs="+", metavar="OVERRIDE", help="model overrides to fit instead (model.name=...)")
     ap.add_argument("--train-rounds", nargs="+", type=int, metavar="ROUND",
                     help="the rounds whose simulations --refit trains on (default: 1 to --round)")
-    ap.add_argument("--calibrate-on", choices=CALIBRATE_ON, default="latest",
-                    help="the pairs --refit calibrates its spread on: the last training round's (as the pipeline, "
-                         "method.calibrate_on) or all")
+    ap.add_argument("--calibrate-on", choices=CALIBRATE_ON,
+                    help="the pairs --refit calibrates its spread on: the last training round's or all "
+                         "(default: the run's own method.calibrate_on)")
     ap.add_argument("--per-parameter", action="store_true", help="also q's error at the truth per parameter")
     args = ap.parse_args()
     train_rounds = args.train_rounds or list(range(1, args.round + 1))
@@ -104,6 +104,8 @@ def main() -> None:
     if not all(1 <= k <= args.round for k in train_rounds):
         raise SystemExit(f"--train-rounds {train_rounds}: rounds 1 to --round {args.round} only")
     cfg = OmegaConf.load(args.run / "config.yaml")
+    # runs from before method.calibrate_on calibrated on the latest round's pairs
+    calibrate_on = args.calibrate_on or cfg.method.get("calibrate_on", "latest")
     comp = build_components(cfg, check_run_config(cfg))
     if comp.real.true_params is None:
         raise SystemExit(f"{args.run}: the run's real data carry no true parameters")
@@ -114,7 +116,7 @@ def main() -> None:
     theta_train = fitted_space(method, torch.cat([s["theta"][:c] for s, c in zip(summaries, cut)]))
     x_train = torch.cat([s["x"][:c] for s, c in zip(summaries, cut)])
     if args.refit:
-        calibrated = calibration_rows(len(x_train), cut[-1], args.calibrate_on)
+        calibrated = calibration_rows(len(x_train), cut[-1], calibrate_on)
         model = refit(comp, cfg, args.refit, theta_train, x_train, calibrated)
     else:
         model = comp.model()
@@ -128,7 +130,7 @@ def main() -> None:
         outside = inputs_outside(model.inputs(x_truth), model.inputs(x_train), theta_train,
                                  model.inputs(summaries[-1]["x"][cut[-1]:]), 0.01)
     distances = torch.tensor(outside["distance"])
-    label = (" ".join(args.refit) + f", trained on rounds {train_rounds}, calibrated on {args.calibrate_on}"
+    label = (" ".join(args.refit) + f", trained on rounds {train_rounds}, calibrated on {calibrate_on}"
              if args.refit else "the run's")
     print(f"| run | round | model | trajectories | at the truth: 50 % / 90 % | prior draws: 50 % / 90 % | truth's summaries: "
           f"median distance (held-out median), share with p < 0.01 |\n|---|---|---|---|---|---|---|\n"

@@ -13,9 +13,7 @@
 #    nominal, sweeps/nominal.yaml's truths at and near the MJCF's values); the first study fits on the last GPU,
 #    each later one on the GPU before (round robin), so that a study split into seed ranges spreads its fits
 #    over the GPUs; the first study runs at normal priority, the later ones under `nice` so that they take what
-#    the others leave. STUDY_ARGS: Hydra overrides for every study's runs (e.g. method.calibrate_on=all); STUDY_SIM:
-#    the studies' simulator (default native; auto simulates on the GPU with MJX, as a run with device=cuda does:
-#    compile MuJoCo Warp's kernels of each task in one run first, as gpu_benchmarks.sh's robots step does).
+#    the others leave. STUDY_ARGS: Hydra overrides for every study's runs (e.g. method.calibrate_on=all).
 # Logs go to $OUT (gpu_benchmarks.sh's background folder); each study's run directories to
 # /tmp/calibration_<task>_<first> (nominal: /tmp/calibration_nominal_<task>_<first>), which `collect` tars with how
 # many runs finished. A seed is a truth: a study that repeats seeds an earlier one finished measures those truths
@@ -40,7 +38,7 @@ for study in ${STUDIES:-FrankaCabinet:0:50:12 ShadowHand:20:50:10}; do
     name=calibration_${task}_$first
     [ "$sweep" = calibration ] || name=calibration_${sweep}_${task}_$first
     CUDA_VISIBLE_DEVICES=$gpu nice -n "$niceness" python3 -m bayessim_exp --config-dir sweeps \
-        --config-name "$sweep" --multirun device=cuda "task=$task" "seed=range($first,$last)" "sim=${STUDY_SIM:-native}" \
+        --config-name "$sweep" --multirun device=cuda "task=$task" "seed=range($first,$last)" sim=native \
         sim.nthread=1 hydra/launcher=local "hydra.launcher.n_jobs=$jobs" "hydra.sweep.dir=/tmp/$name" ${STUDY_ARGS:-} \
         >"$OUT/$name.log" 2>&1 &
     niceness=10

@@ -29,8 +29,10 @@ mkdir -p "$OUT"
 if [ "${1:-}" = collect ]; then
     for log in "$WORK"/*.log; do [ -f "$log" ] && { echo "== ${log##*/}"; tail -n 3 "$log"; }; done
     PYTHONPATH=/tmp/site:$PWD/src "$PY" benchmarks/real_robot_rounds.py "$WORK"/*/ | tee "$OUT/real_robot_rounds.md"
+    # .hydra/config.yaml holds the rounds configured: without it the report counts a run cut short as finished
     (cd /tmp && tar -czf "$OUT/real_robot_studies.tar.gz" real_robot_studies/*.log real_robot_studies/*/*/results.json \
-        real_robot_studies/*/*/.hydra/overrides.yaml real_robot_studies/*/*/error.txt 2>/dev/null)
+        real_robot_studies/*/*/.hydra/overrides.yaml real_robot_studies/*/*/.hydra/config.yaml \
+        real_robot_studies/*/*/error.txt 2>/dev/null)
     exit 0
 fi
 

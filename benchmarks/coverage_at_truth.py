@@ -42,18 +42,27 @@ from bayessim_exp.run_config import check_run_config
 from bayessim_exp.stages import RoundContext
 
 
-def coverage(comp: Components, method: BayesSim, ctx: RoundContext, model, theta: torch.Tensor,
-             seed: int) -> tuple[dict, torch.Tensor]:
-    """Shares of theta's rows inside their own posterior's 50 % / 90 % regions, one trajectory each; the summaries."""
+def conditioned(comp: Components, method: BayesSim, ctx: RoundContext, model, theta: torch.Tensor,
+                seed: int) -> tuple[list, torch.Tensor, torch.Tensor]:
+    """One trajectory at each row of theta, each conditioned on alone with the round's model and proposal in the
+    method's parameter space: (posteriors and summaries of the rows kept, [N] bool: the rows kept, neither diverged
+    nor with non-finite summaries)."""
     traj = comp.sims.rollout(theta, comp.policy(seed, ctx), comp.rc.collect.horizon, seed)
     x = comp.summarizer(traj.to(comp.device)).cpu()
     kept = ~traj.diverged.cpu() & torch.isfinite(x).all(-1)
     proposal = method.proposal(ctx)
+    posteriors = [condition(model, x_i, comp.prior, proposal=proposal, seed=seed, probit=method.probit)[0]
+                  for x_i in x[kept]]
+    return posteriors, x[kept], kept
+
+
+def coverage(comp: Components, method: BayesSim, ctx: RoundContext, model, theta: torch.Tensor,
+             seed: int) -> tuple[dict, torch.Tensor]:
+    """Shares of theta's rows inside their own posterior's 50 % / 90 % regions, one trajectory each; the summaries."""
+    posteriors, x, kept = conditioned(comp, method, ctx, model, theta, seed)
     generator = torch.Generator().manual_seed(seed)
-    levels = torch.tensor([own_level(condition(model, x_i, comp.prior, proposal=proposal, seed=seed,
-                                               probit=method.probit)[0], t.double(), 500, generator)
-                           for t, x_i in zip(theta[kept], x[kept])])
-    return {f"{level:g}": float((levels < level).double().mean()) for level in (0.5, 0.9)}, x[kept]
+    levels = torch.tensor([own_level(post, t.double(), 500, generator) for post, t in zip(posteriors, theta[kept])])
+    return {f"{level:g}": float((levels < level).double().mean()) for level in (0.5, 0.9)}, x
 
 
 def per_parameter(model, method: BayesSim, names: list[str], truth: torch.Tensor, x: torch.Tensor) -> str:

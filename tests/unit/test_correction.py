@@ -89,6 +89,21 @@ def test_non_positive_definite_correction_falls_back_to_importance_sampling(capl
     assert math.isclose(post.mean.item(), exact_mean.item(), abs_tol=0.01)
 
 
+def test_importance_sampling_covers_the_box_when_the_conditional_s_mass_lies_outside_it():
+    """A model fitted as its mixture truncated to the box (models/box_mass.py) may put a component's mean far outside
+    it: the conditionals' Gaussians then draw no base point inside, and the prior's box must cover the target."""
+    low, high = torch.tensor([-1.0], dtype=torch.float64), torch.tensor([2.0], dtype=torch.float64)
+    q = _single(torch.tensor([12.0]), 4.0 * torch.eye(1))  # inside the box: rising toward the upper face
+    prop = _single(torch.tensor([0.0]), 0.25 * torch.eye(1))
+    post = posterior([q], BoxUniform(low, high), prop)
+    assert isinstance(post, ImportancePosterior)
+    grid = torch.linspace(-1, 2, 3001, dtype=torch.float64)[:, None]
+    dens = (q.log_prob(grid) - prop.log_prob(grid)).exp()
+    exact_mean = torch.trapezoid(dens * grid[:, 0], grid[:, 0]) / torch.trapezoid(dens, grid[:, 0])
+    assert math.isclose(post.mean.item(), exact_mean.item(), abs_tol=0.02)
+    assert abs(torch.trapezoid(post.log_prob(grid).exp(), grid[:, 0]).item() - 1.0) < 0.02
+
+
 def test_moment_matched_proposal_keeps_the_correction_in_closed_form():
     from bayessim_exp.inference.bayessim.proposals import moment_matched
 

@@ -13,6 +13,10 @@ component (in standardised units), fitted by maximum likelihood on the validatio
 stopped early is over- or under-dispersed, by different amounts per parameter; rescaling is
 temperature scaling (Guo et al. 2017) per output, and it can only raise the validation likelihood.
 Then one common factor >= 1 that calibrates the joint HPD regions on the same pairs (models/spread.py).
+
+`set_support(low, high)`: the posterior is read truncated to that box (a box-space model, whose posteriors the
+conditioning truncates to the prior's box): the network is then trained, and its spread calibrated, on the
+truncated mixture's likelihood (models/box_mass.py), for diagonal components or D <= 2.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from ..data_files import data_class
 from ..distributions.mixture import GaussianMixture, MixtureBatch
 from ..errors import ConfigError
 from .base import StandardizedDensityModel, Standardizer, TrainConfig
+from .box_mass import TruncatedMixtureBatch, log_box_mass, supported
 from .mixture_nll import LOG_DIAGONAL_BOUND, HeadNLL, mixture_nll
 from .projection import RidgeProjection
 from .spread import JOINT_ROWS, SpreadScale, joint_factor, member_shares
@@ -140,6 +145,8 @@ class MDNN(StandardizedDensityModel):
     """`embedding` (optional): a trainable module in front of the network, trained jointly
     (learned summaries); it maps standardised summaries [N, x_dim] to features [N, E]."""
 
+    support: tuple[torch.Tensor, torch.Tensor] | None = None  # parameter units: set_support
+
     def __init__(self, cfg: MdnnConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
         act = ACTIVATIONS[cfg.activation]
@@ -154,11 +161,37 @@ class MDNN(StandardizedDensityModel):
                                   "x_norm": self.x_norm, "theta_norm": self.theta_norm, "spread": self.spread,
                                   **({} if self.projection is None else {"projection": self.projection})})
 
+    def set_support(self, low: torch.Tensor | None, high: torch.Tensor | None = None) -> bool:
+        """Train and calibrate the mixture truncated to the box [low, high] (parameter units; None: untruncated)
+        from the next fit on; False (and untruncated) where the box mass is not computed for these components."""
+        trains_here = type(self)._nll is MDNN._nll  # a subclass with its own loss (mdrff) stays untruncated
+        if low is None or not trains_here or not supported(self.theta_dim, self.cfg.covariance == "diagonal"):
+            self.support = None
+            return low is None
+        self.support = (torch.as_tensor(low, dtype=torch.float64), torch.as_tensor(high, dtype=torch.float64))
+        return True
+
+    def _standardized_support(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        if self.support is None:
+            return None
+        shift, scale = self.theta_norm.shift.double().cpu(), self.theta_norm.scale.double().cpu()
+        return (self.support[0] - shift) / scale, (self.support[1] - shift) / scale
+
+    def _log_box_mass(self, log_w: torch.Tensor, means: torch.Tensor, U: torch.Tensor) -> torch.Tensor:
+        """log of the mixture's mass inside the support [N] (standardised units)."""
+        low, high = self._standardized_support()
+        log_mass = log_box_mass(means, U, low, high, diagonal=self.cfg.covariance == "diagonal")
+        return torch.logsumexp(log_w + log_mass, -1)
+
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:
         # the mean of the members' own losses: each member has its own gradients (early stopping is shared)
         out = self.members(self.embedding(x_std))
         count = len(out)
-        losses = self.head.nll(out.reshape(-1, out.shape[-1]), theta_std.repeat(count, 1))
+        flat = out.reshape(-1, out.shape[-1])
+        losses = self.head.nll(flat, theta_std.repeat(count, 1))
+        if self.support is not None:  # the truncated mixture: minus log of its mass inside the box
+            logits, means, U = self.head(flat)
+            losses = losses + self._log_box_mass(torch.log_softmax(logits, -1), means, U)
         return losses if count == 1 else losses.reshape(count, -1).mean(0)
 
     def _mixtures(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -190,7 +223,11 @@ class MDNN(StandardizedDensityModel):
             log_scale = torch.tensor(values, dtype=torch.float32, device=theta_std.device, requires_grad=True)
             total = 0.0
             for theta, log_w, means, U in outputs:
-                loss = mixture_nll(log_w, means, self.spread.scale_factors(U, log_scale), theta).sum() / count
+                scaled = self.spread.scale_factors(U, log_scale)
+                loss = mixture_nll(log_w, means, scaled, theta)
+                if self.support is not None:
+                    loss = loss + self._log_box_mass(log_w, means, scaled)
+                loss = loss.sum() / count
                 loss.backward()
                 total += loss.item()
             return total, log_scale.grad.double().cpu().numpy()
@@ -206,7 +243,11 @@ class MDNN(StandardizedDensityModel):
             first = outputs[:math.ceil(JOINT_ROWS / _CALIBRATION_CHUNK)]
             theta, log_w, means, U = (torch.cat(part)[:JOINT_ROWS] for part in zip(*first))
             diagonal = self.cfg.covariance == "diagonal"
-            joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta, diagonal=diagonal, seed=seed)
+            if self.support is None:
+                joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta, diagonal=diagonal,
+                                             seed=seed)
+            else:  # a truncated mixture's regions need not grow with a common factor: the marginals' factors alone
+                joint, record = 1.0, {"pairs": len(theta), "truncated": True}
             self.spread.log_scale.add_(math.log(joint))
             if self.members.count > 1:
                 record["members_inside"] = member_shares(log_w, means, self.spread.scale_factors(U), theta,
@@ -221,7 +262,10 @@ class MDNN(StandardizedDensityModel):
         log_w, means, U = self._mixtures(self.inputs(x.float()))
         shift, scale = self.theta_norm.shift.double(), self.theta_norm.scale.double()
         # theta = shift + scale * theta_std: the precision factors divide by the scale, column by column
-        return MixtureBatch(log_w, means.double() * scale + shift, self.spread.scale_factors(U).double() / scale)
+        means, factors = means.double() * scale + shift, self.spread.scale_factors(U).double() / scale
+        if self.support is not None:  # trained as the mixture truncated to the box: checked as it
+            return TruncatedMixtureBatch(log_w, means, factors, *self.support, diagonal=self.cfg.covariance == "diagonal")
+        return MixtureBatch(log_w, means, factors)
 
     @torch.no_grad()
     def conditional(self, x_obs: torch.Tensor) -> GaussianMixture:

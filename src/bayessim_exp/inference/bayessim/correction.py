@@ -226,6 +226,8 @@ def tempered_posterior(conditionals: Sequence, prior, proposal=None, *, max_comp
         base_mix = _temper(moment_product(), tau)
         inflated = GaussianMixture(base_mix.log_weights, base_mix.means, _INFLATE * base_mix.covs)
         parts = [base_mix, inflated] + ([conditionals[0]] if n == 1 else [])
+        if box is not None:  # the conditionals' Gaussians may put their mass outside the box the target lives in
+            parts.append(prior)
         log_target = CorrectedProduct(list(conditionals), prior, prior_power, corrected, tau)
         result = ImportancePosterior(log_target, DefensiveMixture(parts), num=importance_draws, seed=seed)
         log.log(logging.WARNING if warn else logging.DEBUG, "posterior: no closed form (%s); using importance "

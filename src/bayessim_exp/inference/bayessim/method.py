@@ -177,6 +177,7 @@ class BayesSim(InferenceMethod):
         model = self.inputs.model()
         if r > 1 and self.cfg.finetune:
             model.load_state_dict(ctx.output("fit", r - 1)["model"])
+        self._truncate_to_box(model, r)
         # trained on the run's device (summaries are stored on the CPU; with device=cuda they are copied there)
         dev = self.inputs.device
         calibrated = calibration_rows(len(theta), len(data[-1][0]), self.cfg.calibrate_on)
@@ -200,6 +201,19 @@ class BayesSim(InferenceMethod):
                     "gain_over_proposal": over_prior - float(proposal_ratio.mean())}
         return {"model": model.state_dict(), "history": history, "num_train": len(theta), "coverage": coverage,
                 "held_out": held_out}
+
+    def _truncate_to_box(self, model, r: int) -> None:
+        """In parameter units (parameter_space=box) the conditioning truncates q to the prior's box; a model that can
+        is trained and calibrated as that truncated mixture (models/box_mass.py). Probit space has no box."""
+        low, high = getattr(self.inputs.prior, "low", None), getattr(self.inputs.prior, "high", None)
+        if self.probit is not None or low is None or not hasattr(model, "set_support"):
+            return
+        low, high = torch.as_tensor(low, dtype=torch.float64), torch.as_tensor(high, dtype=torch.float64)
+        if not (torch.isfinite(low).all() and torch.isfinite(high).all()):
+            return
+        if not model.set_support(low, high) and r == 1:
+            log.info("parameter_space=box: the model's components have no box mass here (full covariance in more "
+                     "than 2 parameters): trained untruncated")
 
     def _fitted_rounds(self, ctx: RoundContext) -> range:
         """The rounds whose simulations the round's model is trained on."""
@@ -237,6 +251,7 @@ class BayesSim(InferenceMethod):
     def _fitted_model(self, ctx: RoundContext):
         model = self.inputs.model()
         model.load_state_dict(ctx.output("fit")["model"])
+        self._truncate_to_box(model, 0)
         return model
 
     def condition(self, ctx: RoundContext) -> dict:

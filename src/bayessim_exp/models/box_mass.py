@@ -22,6 +22,7 @@ import torch
 from ..distributions.mixture import MixtureBatch
 
 _NODES, _WEIGHTS = (torch.from_numpy(v) for v in np.polynomial.legendre.leggauss(24))
+_QUADRATURE: dict = {}  # (device, dtype) -> the nodes and weights there: copied once, not inside a CUDA graph
 _Z_BOUND = 7.0  # the first coordinate's standard scores are integrated over [-7, 7] at most: the rest is < 1e-11
 _FLOOR = 1e-300
 
@@ -61,12 +62,20 @@ def log_box_mass(means: torch.Tensor, U: torch.Tensor, low: torch.Tensor, high: 
     za = ((low[0] - means[..., 0]) / s1).clamp(-_Z_BOUND, _Z_BOUND)
     zb = ((high[0] - means[..., 0]) / s1).clamp(-_Z_BOUND, _Z_BOUND)
     half, mid = (zb - za) / 2, (zb + za) / 2
-    z = mid[..., None] + half[..., None] * _NODES.to(means)  # [N, K, Q]
+    nodes, weights = _quadrature(means)
+    z = mid[..., None] + half[..., None] * nodes  # [N, K, Q]
     m = means[..., 1, None] + (rho * s2)[..., None] * z  # the second coordinate's conditional mean and sd
     s = (s2 * torch.sqrt(1 - rho**2))[..., None]
     inner = torch.special.ndtr((high[1] - m) / s) - torch.special.ndtr((low[1] - m) / s)
-    mass = half * (_WEIGHTS.to(means) * torch.exp(-0.5 * z**2) * inner).sum(-1) / math.sqrt(2 * math.pi)
+    mass = half * (weights * torch.exp(-0.5 * z**2) * inner).sum(-1) / math.sqrt(2 * math.pi)
     return torch.log(mass.clamp_min(_FLOOR)).to(dtype)
+
+
+def _quadrature(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    key = (like.device, like.dtype)
+    if key not in _QUADRATURE:
+        _QUADRATURE[key] = (_NODES.to(like), _WEIGHTS.to(like))
+    return _QUADRATURE[key]
 
 
 def inside(theta: torch.Tensor, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:

@@ -146,6 +146,7 @@ class MDNN(StandardizedDensityModel):
     (learned summaries); it maps standardised summaries [N, x_dim] to features [N, E]."""
 
     support: tuple[torch.Tensor, torch.Tensor] | None = None  # parameter units: set_support
+    _device_support: tuple | None = None  # (device, low, high): _support_on
 
     def __init__(self, cfg: MdnnConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None = None):
         self.cfg, self.theta_dim, self.x_dim = cfg, theta_dim, x_dim
@@ -169,18 +170,22 @@ class MDNN(StandardizedDensityModel):
             self.support = None
             return low is None
         self.support = (torch.as_tensor(low, dtype=torch.float64), torch.as_tensor(high, dtype=torch.float64))
+        self._device_support = None
         return True
 
-    def _standardized_support(self) -> tuple[torch.Tensor, torch.Tensor] | None:
-        if self.support is None:
-            return None
-        shift, scale = self.theta_norm.shift.double().cpu(), self.theta_norm.scale.double().cpu()
-        return (self.support[0] - shift) / scale, (self.support[1] - shift) / scale
+    def _support_on(self, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+        """The support copied to `device` once: a copy from the CPU inside the loss would keep a CUDA graph from
+        capturing the training step (models/adam_steps.py)."""
+        if self._device_support is None or self._device_support[0] != device:
+            self._device_support = (device, *(bound.to(device) for bound in self.support))
+        return self._device_support[1], self._device_support[2]
 
     def _log_box_mass(self, log_w: torch.Tensor, means: torch.Tensor, U: torch.Tensor) -> torch.Tensor:
         """log of the mixture's mass inside the support [N] (standardised units)."""
-        low, high = self._standardized_support()
-        log_mass = log_box_mass(means, U, low, high, diagonal=self.cfg.covariance == "diagonal")
+        low, high = self._support_on(means.device)
+        shift, scale = self.theta_norm.shift.double(), self.theta_norm.scale.double()
+        log_mass = log_box_mass(means, U, (low - shift) / scale, (high - shift) / scale,
+                                diagonal=self.cfg.covariance == "diagonal")
         return torch.logsumexp(log_w + log_mass, -1)
 
     def _nll(self, theta_std: torch.Tensor, x_std: torch.Tensor) -> torch.Tensor:

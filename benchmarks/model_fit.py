@@ -1,7 +1,7 @@
 """Posterior-model training speed: the same fit on the CPU and on a GPU, eager and from a CUDA graph.
 
     python benchmarks/model_fit.py [--models mdnn mdrff flow] [--sims 10000] [--epochs 20]
-        [--theta-dim 2] [--x-dim 6] [--batch-size 256] [--set ensemble=1] [--threads 16 8]
+        [--theta-dim 2] [--x-dim 6] [--batch-size 256] [--set ensemble=1] [--threads 16 8] [--box]
 
 Synthetic pairs (x = A theta + noise) of the pipeline's default size; every fit runs exactly
 `--epochs` epochs (patience = epochs), so rows compare the same work. Rows per model: `cpu` (the
@@ -12,6 +12,8 @@ models/base.CPU_TRAINING_THREADS of them, which the row names). `--set` override
 (`--set ensemble=3 covariance=full components=1`: the mission's ShadowHand model). Mixture models (mdnn,
 mdrff) get a `matrix loss` row per device as well: the loss by autograd through the assembled precision
 factors (`mixture_nll`) instead of the head's loss with its written-out gradient (`HeadNLL`).
+`--box`: mdnn gets a `box-truncated` row per device as well, the fit of box space's truncated mixture (the
+parameters' box [0, 1]^D, models/box_mass.py), whose `cuda graph` row says whether that loss is captured.
 """
 
 from __future__ import annotations
@@ -42,11 +44,13 @@ def pairs(n: int, theta_dim: int, x_dim: int) -> tuple[torch.Tensor, torch.Tenso
 
 
 def timed_fit(name: str, cfg: dict, theta: torch.Tensor, x: torch.Tensor, device: str, graphed: bool,
-              matrix_loss: bool = False) -> float:
+              matrix_loss: bool = False, box: bool = False) -> float:
     # the eager row swaps the step factory: the same fit with one launch per kernel
     base.adam_steps = adam_steps.adam_steps if graphed else adam_steps.EagerAdamSteps
     mdnn.MixtureHead.nll = matrix_form_nll if matrix_loss else HEAD_NLL
     model = build("model", {"name": name, **cfg}, theta_dim=theta.shape[1], x_dim=x.shape[1])
+    if box:  # pairs() draws theta in the unit box
+        model.set_support(torch.zeros(theta.shape[1]), torch.ones(theta.shape[1]))
     theta, x = theta.to(device), x.to(device)
     if device == "cuda":
         torch.cuda.synchronize()
@@ -65,6 +69,7 @@ def main() -> None:
     ap.add_argument("--batch-size", type=int, default=256)
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="model config overrides (YAML values)")
     ap.add_argument("--threads", nargs="+", type=int, default=[torch.get_num_threads()])
+    ap.add_argument("--box", action="store_true", help="mdnn: rows of the fit truncated to the parameters' box")
     args = ap.parse_args()
     overrides = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in args.set)}
     theta, x = pairs(args.sims, args.theta_dim, args.x_dim)
@@ -91,10 +96,12 @@ def main() -> None:
         for label, device, graphed, threads in variants:
             torch.set_num_threads(threads)
             # the loss by autograd: one row per device, not per thread count
-            for matrix_loss in (False, True) if mixture and len(args.threads) == 1 else (False,):
-                per_epoch = timed_fit(name, cfg, theta, x, device, graphed, matrix_loss) / args.epochs
+            losses = [(False, False)] + [(True, False)] * (mixture and len(args.threads) == 1) \
+                + [(False, True)] * (args.box and name == "mdnn")
+            for matrix_loss, box in losses:
+                per_epoch = timed_fit(name, cfg, theta, x, device, graphed, matrix_loss, box) / args.epochs
                 baseline = baseline or per_epoch
-                label_ = f"{label}, matrix loss" if matrix_loss else label
+                label_ = f"{label}, matrix loss" if matrix_loss else f"{label}, box-truncated" if box else label
                 print(f"{name:<8} {label_:<26} {per_epoch:>12.4f} {baseline / per_epoch:>7.1f}x", flush=True)
 
 

@@ -73,6 +73,13 @@ def test_several_observations_with_a_proposal_and_a_uniform_prior():
     torch.testing.assert_close(post.mixture.covariance, cov, atol=1e-6, rtol=1e-6)
 
 
+def _exact_on_box(q, prop, low, high) -> tuple[torch.Tensor, torch.Tensor]:
+    """A grid over the one-parameter box and the mean of q / prop restricted to it (the posterior under a flat prior)."""
+    grid = torch.linspace(low.item(), high.item(), 3001, dtype=torch.float64)[:, None]
+    dens = (q.log_prob(grid) - prop.log_prob(grid)).exp()
+    return grid, torch.trapezoid(dens * grid[:, 0], grid[:, 0]) / torch.trapezoid(dens, grid[:, 0])
+
+
 def test_non_positive_definite_correction_falls_back_to_importance_sampling(caplog):
     """q broader than the proposal: 1/p~ outgrows q, no Gaussian; exact on the box by importance sampling."""
     low, high = torch.tensor([-1.0], dtype=torch.float64), torch.tensor([2.0], dtype=torch.float64)
@@ -81,9 +88,7 @@ def test_non_positive_definite_correction_falls_back_to_importance_sampling(capl
     post = posterior([q], BoxUniform(low, high), prop)
     assert isinstance(post, ImportancePosterior)
     assert "not positive definite" in caplog.text
-    grid = torch.linspace(-1, 2, 3001, dtype=torch.float64)[:, None]
-    dens = (q.log_prob(grid) - prop.log_prob(grid)).exp()
-    exact_mean = torch.trapezoid(dens * grid[:, 0], grid[:, 0]) / torch.trapezoid(dens, grid[:, 0])
+    grid, exact_mean = _exact_on_box(q, prop, low, high)
     assert abs(torch.trapezoid(post.log_prob(grid).exp(), grid[:, 0]).item() - 1.0) < 0.02
     assert abs(post.sample((20000,)).mean().item() - exact_mean.item()) < 0.02
     assert math.isclose(post.mean.item(), exact_mean.item(), abs_tol=0.01)
@@ -97,9 +102,7 @@ def test_importance_sampling_covers_the_box_when_the_conditional_s_mass_lies_out
     prop = _single(torch.tensor([0.0]), 0.25 * torch.eye(1))
     post = posterior([q], BoxUniform(low, high), prop)
     assert isinstance(post, ImportancePosterior)
-    grid = torch.linspace(-1, 2, 3001, dtype=torch.float64)[:, None]
-    dens = (q.log_prob(grid) - prop.log_prob(grid)).exp()
-    exact_mean = torch.trapezoid(dens * grid[:, 0], grid[:, 0]) / torch.trapezoid(dens, grid[:, 0])
+    grid, exact_mean = _exact_on_box(q, prop, low, high)
     assert math.isclose(post.mean.item(), exact_mean.item(), abs_tol=0.02)
     assert abs(torch.trapezoid(post.log_prob(grid).exp(), grid[:, 0]).item() - 1.0) < 0.02
 

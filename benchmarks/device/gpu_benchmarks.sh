@@ -310,8 +310,11 @@ print(', '.join(f'{n} {s}' for s, n in sorted(collections.Counter(j.status for j
     fi
     exit 0
 fi
-if [ "${1:-}" = background ]; then  # the steps in a new session: it installs, then runs them, after this call ends
+if [ "${1:-}" = background ]; then  # the steps in a new session, after this call ends
     shift
+    # installed here, so that a call that carried no wheels fails now (`background ... && sleep N` ends at once)
+    install_wheels || exit 1
+    install_warp || exit 1
     mkdir -p "$BACKGROUND_OUT"
     OUT=$BACKGROUND_OUT setsid nohup bash "$0" "$@" >"$BACKGROUND_OUT/background.log" 2>&1 </dev/null &
     say "started in the background: $* (bash $0 collect copies their outputs)"

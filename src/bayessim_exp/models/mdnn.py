@@ -12,11 +12,11 @@ average, itself a Gaussian mixture (docs/statistics.md: averaging corrects overc
 component (in standardised units), fitted by maximum likelihood on the validation split. A network
 stopped early is over- or under-dispersed, by different amounts per parameter; rescaling is
 temperature scaling (Guo et al. 2017) per output, and it can only raise the validation likelihood.
-Then one common factor >= 1 that calibrates the joint HPD regions on the same pairs (models/spread.py).
+Then one common factor that calibrates the joint HPD regions on the same pairs (models/spread.py).
 
 `set_support(low, high)`: the posterior is read truncated to that box (a box-space model, whose posteriors the
 conditioning truncates to the prior's box): the network is then trained, and its spread calibrated, on the
-truncated mixture's likelihood (models/box_mass.py), for diagonal components or D <= 2.
+truncated mixture's likelihood and regions (models/box_mass.py), for diagonal components or D <= 2.
 """
 
 from __future__ import annotations
@@ -180,11 +180,17 @@ class MDNN(StandardizedDensityModel):
             self._device_support = (device, *(bound.to(device) for bound in self.support))
         return self._device_support[1], self._device_support[2]
 
+    def _standardised_support(self, device: torch.device) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """The support in standardised units (float64 [D] each), None where untruncated."""
+        if self.support is None:
+            return None
+        low, high = self._support_on(device)
+        shift, scale = self.theta_norm.shift.double(), self.theta_norm.scale.double()
+        return (low - shift) / scale, (high - shift) / scale
+
     def _log_box_mass(self, log_w: torch.Tensor, means: torch.Tensor, U: torch.Tensor) -> torch.Tensor:
         """log of the mixture's mass inside the support [N] (standardised units)."""
-        low, high = self._support_on(means.device)
-        shift, scale = self.theta_norm.shift.double(), self.theta_norm.scale.double()
-        log_mass = log_box_mass(means, U, (low - shift) / scale, (high - shift) / scale,
+        log_mass = log_box_mass(means, U, *self._standardised_support(means.device),
                                 diagonal=self.cfg.covariance == "diagonal")
         return torch.logsumexp(log_w + log_mass, -1)
 
@@ -247,16 +253,13 @@ class MDNN(StandardizedDensityModel):
             # the first JOINT_ROWS pairs, from the chunks that hold them (dense factors of all 4,096 are gigabytes)
             first = outputs[:math.ceil(JOINT_ROWS / _CALIBRATION_CHUNK)]
             theta, log_w, means, U = (torch.cat(part)[:JOINT_ROWS] for part in zip(*first))
-            diagonal = self.cfg.covariance == "diagonal"
-            if self.support is None:
-                joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta, diagonal=diagonal,
-                                             seed=seed)
-            else:  # a truncated mixture's regions need not grow with a common factor: the marginals' factors alone
-                joint, record = 1.0, {"pairs": len(theta), "truncated": True}
+            diagonal, box = self.cfg.covariance == "diagonal", self._standardised_support(theta.device)
+            joint, record = joint_factor(log_w, means, self.spread.scale_factors(U), theta, diagonal=diagonal,
+                                         seed=seed, box=box)
             self.spread.log_scale.add_(math.log(joint))
             if self.members.count > 1:
                 record["members_inside"] = member_shares(log_w, means, self.spread.scale_factors(U), theta,
-                                                         self.members.count, diagonal=diagonal, seed=seed)
+                                                         self.members.count, diagonal=diagonal, seed=seed, box=box)
         return {"spread_scale": torch.exp(self.spread.log_scale).tolist(),
                 "joint_spread": {"factor": joint, **record}}
 

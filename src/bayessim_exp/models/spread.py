@@ -129,13 +129,7 @@ def _quadratic_terms(log_w, means, U, theta, diagonal: bool, seed: int) -> tuple
     for r in torch.arange(n, device=means.device).split(chunk):
         mu, Ur, comp, e = means[r], U[r], component[r], eps[r]
         mu_drawn = torch.gather(mu, 1, comp[..., None].expand(-1, -1, d))  # [n, S, D]
-        whitened = torch.zeros_like(e)  # U_k^-1 eps of each draw's own component
-        for m in range(k):
-            if diagonal:
-                own = e / diag[r, m][:, None]
-            else:
-                own = torch.linalg.solve_triangular(Ur[:, m], e.transpose(1, 2), upper=True).transpose(1, 2)
-            whitened = torch.where((comp == m)[..., None], own, whitened)
+        whitened = _whitened(e, Ur, diag[r], comp, diagonal)
         A, B, C, T = [], [], [], []
         for m in range(k):
             if diagonal:
@@ -153,6 +147,20 @@ def _quadratic_terms(log_w, means, U, theta, diagonal: bool, seed: int) -> tuple
             part.append(torch.stack(values, -1))
         parts[3].append(torch.stack(T, -1))
     return (base, *(torch.cat(p) for p in parts))
+
+
+def _whitened(eps: torch.Tensor, U: torch.Tensor, diag: torch.Tensor, component: torch.Tensor,
+              diagonal: bool) -> torch.Tensor:
+    """U_k^-1 eps [n, S, D] of each draw under its own component k (component [n, S]; U [n, M, D, D], its
+    diagonal [n, M, D])."""
+    out = torch.zeros_like(eps)
+    for m in range(U.shape[1]):
+        if diagonal:
+            own = eps / diag[:, m][:, None]
+        else:
+            own = torch.linalg.solve_triangular(U[:, m], eps.transpose(1, 2), upper=True).transpose(1, 2)
+        out = torch.where((component == m)[..., None], own, out)
+    return out
 
 
 def _levels_at(c: float, base, A, B, C, T) -> torch.Tensor:
@@ -191,13 +199,7 @@ def _box_terms(log_w, means, U, theta, diagonal: bool, seed: int, box: Box) -> t
     chunk = max(1, _CHUNK_ELEMENTS // (_JOINT_DRAWS * k * d))
     for r in torch.arange(n, device=means.device).split(chunk):
         mu, Ur, comp = means[r], U[r], component[r]
-        drawn = torch.zeros_like(eps[r])
-        for m in range(k):
-            if diagonal:
-                own = eps[r] / diag[r, m][:, None]
-            else:
-                own = torch.linalg.solve_triangular(Ur[:, m], eps[r].transpose(1, 2), upper=True).transpose(1, 2)
-            drawn = torch.where((comp == m)[..., None], mu[:, m, None] + own, drawn)
+        drawn = torch.gather(mu, 1, comp[..., None].expand(-1, -1, d)) + _whitened(eps[r], Ur, diag[r], comp, diagonal)
         y = torch.cat([drawn, uniform[r]], 1)  # [n, S, D]
         factors = diag[r] if diagonal else Ur
         Q = torch.stack([_quadratic(factors[:, m], y - mu[:, m, None], diagonal) for m in range(k)], -1)

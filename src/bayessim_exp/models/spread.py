@@ -30,6 +30,7 @@ import torch
 from torch import nn
 
 from ..distributions.hpd import shares_inside
+from .box_mass import TruncatedMixtureBatch
 
 JOINT_LEVELS = (0.5, 0.9)  # the regions the common factor calibrates (those the guard and the studies read)
 JOINT_ROWS = 1000  # validation pairs to fit it on (the caller's cut): a share's standard error at 90 % is 0.01
@@ -129,7 +130,13 @@ def _quadratic_terms(log_w, means, U, theta, diagonal: bool, seed: int) -> tuple
     for r in torch.arange(n, device=means.device).split(chunk):
         mu, Ur, comp, e = means[r], U[r], component[r], eps[r]
         mu_drawn = torch.gather(mu, 1, comp[..., None].expand(-1, -1, d))  # [n, S, D]
-        whitened = _whitened(e, Ur, diag[r], comp, diagonal)
+        whitened = torch.zeros_like(e)  # U_k^-1 eps of each draw's own component
+        for m in range(k):
+            if diagonal:
+                own = e / diag[r, m][:, None]
+            else:
+                own = torch.linalg.solve_triangular(Ur[:, m], e.transpose(1, 2), upper=True).transpose(1, 2)
+            whitened = torch.where((comp == m)[..., None], own, whitened)
         A, B, C, T = [], [], [], []
         for m in range(k):
             if diagonal:
@@ -149,20 +156,6 @@ def _quadratic_terms(log_w, means, U, theta, diagonal: bool, seed: int) -> tuple
     return (base, *(torch.cat(p) for p in parts))
 
 
-def _whitened(eps: torch.Tensor, U: torch.Tensor, diag: torch.Tensor, component: torch.Tensor,
-              diagonal: bool) -> torch.Tensor:
-    """U_k^-1 eps [n, S, D] of each draw under its own component k (component [n, S]; U [n, M, D, D], its
-    diagonal [n, M, D])."""
-    out = torch.zeros_like(eps)
-    for m in range(U.shape[1]):
-        if diagonal:
-            own = eps / diag[:, m][:, None]
-        else:
-            own = torch.linalg.solve_triangular(U[:, m], eps.transpose(1, 2), upper=True).transpose(1, 2)
-        out = torch.where((component == m)[..., None], own, out)
-    return out
-
-
 def _levels_at(c: float, base, A, B, C, T) -> torch.Tensor:
     """HPD level of each theta_n in q_n with every standard deviation multiplied by c: [N]."""
     at_draws = torch.logsumexp(base[:, None] - 0.5 * (A / c**2 + 2 * B / c + C), -1)  # [N, S]
@@ -179,44 +172,38 @@ def _quadratic(U: torch.Tensor, diff: torch.Tensor, diagonal: bool) -> torch.Ten
 
 def _box_terms(log_w, means, U, theta, diagonal: bool, seed: int, box: Box) -> tuple[torch.Tensor, ...]:
     """What a truncated mixture's HPD levels at every factor c are computed from: fixed draws y from a defensive
-    proposal g, half uniform on the box and half the untruncated mixture at c = 1 (its draws outside the box weigh
-    nothing), so that a mixture with its means far outside the box (a truncated fit may use a component's tail) is
-    read where it has mass. At factor c a draw weighs q_c(y) / g(y) inside the box (the truncated mixture's
-    normaliser cancels). Returns (base [N, M]: log weight + log det U_m, Q [N, S, M]: |U_m (y - mu_m)|^2, T [N, M]:
-    theta's, log g [N, S], inside [N, S])."""
+    proposal g, half the truncated mixture at c = 1 (models/box_mass.py's sampler, which reaches the box's mass of a
+    mixture whose means lie far outside it) and half uniform on the box (for the other factors). At factor c a draw
+    weighs q_c(y) / g(y) (the truncated mixture's normaliser cancels). Returns (base [N, M]: log weight + log det U_m,
+    Q [N, S, M]: |U_m (y - mu_m)|^2, T [N, M]: theta's, log g [N, S])."""
     n, k, d = means.shape
     low, high = box
     generator = torch.Generator().manual_seed(seed)
     half = _JOINT_DRAWS // 2
-    component = torch.multinomial(log_w.exp().cpu().double(), half, replacement=True,
-                                  generator=generator).to(means.device)  # [N, S/2]
-    eps = torch.randn(n, half, d, generator=generator).to(means.device)
-    uniform = low + (high - low) * torch.rand(n, _JOINT_DRAWS - half, d, generator=generator).to(means.device)
+    # on the CPU, where MixtureBatch draws
+    truncated = TruncatedMixtureBatch(log_w.cpu(), means.cpu(), U.cpu(), low.cpu(), high.cpu(), diagonal=diagonal)
+    drawn = truncated.sample(half, generator).to(means)  # [S/2, N, D]
+    uniform = low + (high - low) * torch.rand(_JOINT_DRAWS - half, n, d, generator=generator).to(means)
+    y = torch.cat([drawn, uniform])  # [S, N, D]
+    log_g = torch.logaddexp(truncated.log_prob(y.cpu()).to(means), -torch.log(high - low).sum()) - math.log(2)
+    y = y.transpose(0, 1)  # [N, S, D]
     diag = torch.diagonal(U, dim1=-2, dim2=-1)  # [N, M, D]
     base = log_w + torch.log(diag).sum(-1)
-    log_uniform = -torch.log(high - low).sum()
-    parts: list[list[torch.Tensor]] = [[], [], [], []]
+    parts: list[list[torch.Tensor]] = [[], []]
     chunk = max(1, _CHUNK_ELEMENTS // (_JOINT_DRAWS * k * d))
     for r in torch.arange(n, device=means.device).split(chunk):
-        mu, Ur, comp = means[r], U[r], component[r]
-        drawn = torch.gather(mu, 1, comp[..., None].expand(-1, -1, d)) + _whitened(eps[r], Ur, diag[r], comp, diagonal)
-        y = torch.cat([drawn, uniform[r]], 1)  # [n, S, D]
-        factors = diag[r] if diagonal else Ur
-        Q = torch.stack([_quadratic(factors[:, m], y - mu[:, m, None], diagonal) for m in range(k)], -1)
-        T = torch.stack([_quadratic(factors[:, m], (theta[r] - mu[:, m])[:, None], diagonal)[:, 0]
-                         for m in range(k)], -1)
-        log_q1 = torch.logsumexp(base[r, None] - 0.5 * Q, -1) - 0.5 * d * math.log(2 * math.pi)
-        log_g = torch.logaddexp(log_q1, log_uniform.expand_as(log_q1)) - math.log(2)
-        for part, values in zip(parts, (Q, T, log_g, ((y >= low) & (y <= high)).all(-1))):
-            part.append(values)
-    return (base, *(torch.cat(p) for p in parts))
+        mu, factors = means[r], diag[r] if diagonal else U[r]
+        parts[0].append(torch.stack([_quadratic(factors[:, m], y[r] - mu[:, m, None], diagonal) for m in range(k)], -1))
+        parts[1].append(torch.stack([_quadratic(factors[:, m], (theta[r] - mu[:, m])[:, None], diagonal)[:, 0]
+                                     for m in range(k)], -1))
+    return base, *(torch.cat(p) for p in parts), log_g.T
 
 
-def _box_levels(c: float, base, Q, T, log_g, inside) -> torch.Tensor:
+def _box_levels(c: float, base, Q, T, log_g) -> torch.Tensor:
     """HPD level of each theta_n in q_n truncated to the box, every standard deviation multiplied by c: [N], the
     share of the truncated mixture's mass denser than theta, by self-normalised importance weights."""
     # log q_c up to its normaliser's -D log c - D/2 log 2 pi, alike for every draw: it cancels in the weights
     at_draws = torch.logsumexp(base[:, None] - 0.5 * Q / c**2, -1)  # [N, S]
     at_theta = torch.logsumexp(base - 0.5 * T / c**2, -1)  # [N]
-    weight = torch.softmax(torch.where(inside, at_draws - log_g, -math.inf), -1)
+    weight = torch.softmax(at_draws - log_g, -1)
     return (weight * (at_draws > at_theta[:, None])).sum(-1).double().cpu()

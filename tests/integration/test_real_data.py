@@ -162,12 +162,18 @@ def test_a_sensor_glitch_in_two_readings_keeps_the_truth_and_most_of_the_informa
     there (method.summary_error=replays), so q reads the parameters from the 78 exact features: the truth inside the
     90 % region in at least 3 of the 4 and a median gain of at least +6 nats at it. Without the error model
     (method.summary_error=none) the replays' tempering widens every direction and the median gain falls to +1.5
-    (docs/statistics.md, 'A summary error model')."""
+    (docs/statistics.md, 'A summary error model'). A glitch read once stays in the model: a round trained with its
+    noise can read nothing, and until the model was kept then, round 3 lost it (SummaryError.carried). At 0.2 the
+    replays of a run can miss the glitch in every round (1 of 32 runs over seeds 0-7 on the development machine):
+    read in at least 3 of the 4."""
     runs = glitched_runs(tmp_path, 0.2)
     levels = [run["rounds"][-1]["truth"]["hpd_level"] for run in runs]
     gains = [run["rounds"][-1]["log_prob_gain"] for run in runs]
-    for run, (_, steps) in zip(runs, GLITCHES):  # the glitched readings are among the features with noise
-        assert {3 * step + 2 for step in steps} <= set(run["rounds"][-1]["summary_error"]["features"])
+    # per run and round: are the glitched readings among the features with noise? Once they are, in every later round
+    held = [[{3 * step + 2 for step in steps} <= set((r["summary_error"] or {"features": []})["features"])
+             for r in run["rounds"]] for run, (_, steps) in zip(runs, GLITCHES)]
+    assert all(rounds == sorted(rounds) for rounds in held), held
+    assert sum(rounds[-1] for rounds in held) >= 3, held
     assert sum(level < 0.9 for level in levels) >= 3, levels
     assert float(np.median(gains)) >= 6.0, gains
 

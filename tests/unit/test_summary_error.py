@@ -27,6 +27,15 @@ def test_the_noise_has_the_read_variance_in_its_features_and_none_elsewhere():
     assert error.record() == {"features": [1, 3], "std": [2.0, 0.5]}
 
 
+def test_a_round_that_reads_no_feature_keeps_the_error_model_and_one_that_reads_some_replaces_it():
+    """A round trained with a feature's noise need not read that feature's error again (its replays' whole residual
+    need not lie beyond theirs)."""
+    error = SummaryError.from_variance(torch.tensor([0.0, 4.0, 0.25, 0.0], dtype=torch.float64))
+    assert error.carried(torch.zeros(4, dtype=torch.float64)).tolist() == [0.0, 4.0, 0.25, 0.0]
+    read = torch.tensor([0.09, 0.0, 1.0, 0.0], dtype=torch.float64)
+    assert error.carried(read).tolist() == read.tolist()
+
+
 class _Rounds:
     """A round context whose condition outputs are given per round."""
 
@@ -49,7 +58,7 @@ def test_round_r_simulates_with_what_round_r_minus_1_s_replays_left_unexplained(
     conditions = {1: {"feature_error": variance}, 2: {"feature_error": torch.zeros(2, dtype=torch.float64)}}
     assert _method("replays")._summary_error(_Rounds(1, conditions)) is None  # round 1: nothing read yet
     torch.testing.assert_close(_method("replays")._summary_error(_Rounds(2, conditions)).std, variance.sqrt())
-    assert _method("replays")._summary_error(_Rounds(3, conditions)) is None  # round 2's replays left nothing
+    assert _method("replays")._summary_error(_Rounds(3, conditions)) is None  # round 2 carried nothing on
     assert _method("none")._summary_error(_Rounds(2, conditions)) is None
     assert _method("replays")._summary_error(_Rounds(2, {1: {}})) is None  # a run recorded before the key
 

@@ -237,8 +237,8 @@ class BayesSim(InferenceMethod):
 
     def _summary_error(self, ctx: RoundContext) -> SummaryError | None:
         """The error model of round ctx.round's simulated summaries (summary_error.py): the features the previous
-        round's replays left unexplained, with their variances; None in round 1, with method.summary_error=none or
-        where nothing was left unexplained."""
+        round's replays left unexplained, with their variances, or where they read none the model that round ran
+        with (SummaryError.carried); None in round 1, with method.summary_error=none or where nothing was left unexplained."""
         if self.cfg.summary_error == "none" or ctx.round == 1:
             return None
         return SummaryError.from_variance(ctx.output("condition", ctx.round - 1).get("feature_error"))
@@ -294,7 +294,8 @@ class BayesSim(InferenceMethod):
             out["posterior"], first, result, out["temperature"], out["tempering"] = temper_to_replays(
                 condition_at, check, torch.diag(self.inputs.prior.stddev.double() ** 2), widen=self.cfg.replay_tempering)
             out["replay_check"], out["unwidened_replay_check"] = result.record(), first.record()
-            out["feature_error"] = first.feature_error  # the next round's error model (_summary_error)
+            # the next round's error model (_summary_error)
+            out["feature_error"] = first.feature_error if error is None else error.carried(first.feature_error)
             ctx.tb.replays(ctx.round, result, list(self.inputs.task.obs_names))
         out["dispersion"] = None if spreads[-1] is None else spreads[-1].record()
         out["temperature"] *= product_tau

@@ -37,6 +37,14 @@ class SummaryError:
             return None
         return cls(variance.double().sqrt())
 
+    def carried(self, read: torch.Tensor) -> torch.Tensor:
+        """The next round's variances [F]: a check's `feature_error` where it read any feature, else this model's.
+        A check reads none where the real summary's whole residual lies within the replays' (replayed_check), as it
+        can for replays of a posterior trained with this noise: no evidence that the error is gone (a glitch read in
+        round 1 was dropped from round 3 so). Where it reads some, the read replaces the model: kept as well, the
+        features each round read by chance piled up and cost information (docs/statistics.md)."""
+        return read if bool((read > 0).any()) else (self.std**2).to(read)
+
     def add(self, x: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
         """x [..., F] with independent noise of `std` in each feature, drawn from `generator` (on the CPU)."""
         noise = torch.randn(x.shape, generator=generator, dtype=torch.float64) * self.std

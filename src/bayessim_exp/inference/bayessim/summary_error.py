@@ -41,8 +41,8 @@ class SummaryError:
         """The next round's variances [F]: a check's `feature_error` where it read any feature, else this model's.
         A check reads none where the real summary's whole residual lies within the replays' (replayed_check), as it
         can for replays of a posterior trained with this noise: no evidence that the error is gone (a glitch read in
-        round 1 was dropped from round 3 so). Where it reads some, the read replaces the model: kept as well, the
-        features each round read by chance piled up and cost information (docs/statistics.md)."""
+        round 1 was dropped from round 3 so: docs/statistics.md). Where it reads some, the read replaces the model:
+        kept as well, the features each round reads by chance would pile up."""
         return read if bool((read > 0).any()) else (self.std**2).to(read)
 
     def add(self, x: torch.Tensor, generator: torch.Generator) -> torch.Tensor:

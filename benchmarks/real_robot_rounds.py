@@ -10,7 +10,9 @@ is the guard's verdict, marked `[range]` where a real summary has more features 
 simulations' range than all but alpha / n of its held-out ones (the guard's range check since commit 9d7f36a,
 applied where no replay widening is; the records of earlier commits keep what it reads); then the final gain at the
 truth and whether the run meets issue 44's acceptance: some round passed the guard, and no round after the first
-simulated from the prior.
+simulated from the prior. With --own each round's cell also has its own posterior's gain at the truth and the truth's
+HPD level in it (from the run's round_NNN/condition.pt), whether or not the guard handed it on: what a fallback gave up,
+or kept out.
 """
 
 from __future__ import annotations
@@ -19,7 +21,12 @@ import argparse
 import statistics
 from pathlib import Path
 
+import numpy as np
+import torch
+
+from bayessim_exp.data_files import load_state
 from bayessim_exp.diagnostics.mismatch import flag_outside
+from bayessim_exp.diagnostics.scoring import truth_rank
 from bayessim_exp.report.jobs import read_jobs
 
 _SHORT = {"the prior": "prior", "linear read of its real data": "read", "simulations nearest its real data": "near",
@@ -39,7 +46,20 @@ def _range_mark(r: dict, alpha: float) -> str:
     return " [range]" if outside and flag_outside(outside, alpha)["flagged"] else ""
 
 
-def rows(sweep: Path, alpha: float) -> list[str]:
+def _own(job, r: dict) -> str:
+    """'; own +26.0 at 0.60': the round's own posterior's gain at the truth and the truth's HPD level in it."""
+    path = job.path / f"round_{r['round']:03d}" / "condition.pt"
+    truth, prior_at_truth = job.results.get("true_params"), r.get("log_prob_true_prior")
+    if not path.is_file() or truth is None or prior_at_truth is None:
+        return ""
+    posterior, names = load_state(path)["posterior"], job.results["param_names"]
+    true = np.array([truth[name] for name in names])
+    gain = float(posterior.log_prob(torch.as_tensor(true, dtype=torch.float64)[None])) - prior_at_truth
+    level = truth_rank(posterior, names, true, seed=0)["hpd_level"]
+    return f"; own {gain:+.1f} at {'n/a' if level is None else f'{level:.2f}'}"
+
+
+def rows(sweep: Path, alpha: float, own: bool = False) -> list[str]:
     jobs = [j for j in read_jobs(sweep) if j.results and j.results["rounds"]]
     out = [f"### {sweep.name} ({len(jobs)} runs with a round)", "",
            "| seed | rounds: proposal from -> guard (gain at the truth) | final gain | a round passed | "
@@ -52,7 +72,7 @@ def rows(sweep: Path, alpha: float) -> list[str]:
             verdict = "pass" if r["guard"]["action"] in ("none", "warn") else r["guard"]["action"]
             gain = r.get("log_prob_gain")
             cells.append(f"{_source(r.get('proposal_from', '?'))} -> {verdict}{_range_mark(r, alpha)} "
-                         f"({'n/a' if gain is None else f'{gain:+.1f}'})")
+                         f"({'n/a' if gain is None else f'{gain:+.1f}'}{_own(job, r) if own else ''})")
         final = rounds[-1].get("log_prob_gain")
         finals.append(final)
         passed = any(r["guard"]["action"] in ("none", "warn", "provisional") for r in rounds)
@@ -70,9 +90,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("sweeps", nargs="+", type=Path)
     parser.add_argument("--alpha", type=float, default=0.01, help="the range check's level (diagnostics.extrapolation_alpha)")
+    parser.add_argument("--own", action="store_true", help="each round's own posterior at the truth, handed on or not")
     args = parser.parse_args()
     for sweep in args.sweeps:
-        print("\n".join(rows(sweep, args.alpha)))
+        print("\n".join(rows(sweep, args.alpha, args.own)))
 
 
 if __name__ == "__main__":

@@ -42,7 +42,8 @@ def finished_runs(dirs: list[Path]) -> dict[tuple[str, str], list[tuple[Path, di
     for d in dirs:
         for path in sorted(d.rglob("results.json")):
             results = json.loads(path.read_text())
-            finished = len(results["rounds"]) == OmegaConf.load(path.parent / "config.yaml").rounds
+            planned = results.get("rounds_planned", OmegaConf.load(path.parent / "config.yaml").rounds)
+            finished = len(results["rounds"]) == planned
             if results.get("true_params") and finished:
                 runs[(results["task"], results["method"])].append((path.parent, results))
     return runs

@@ -15,7 +15,8 @@
 #   default pysiglib) and on native MuJoCo with device=cpu ($MISSION_THREADS threads for simulation and fit, default 6);
 # - nominal_<task>: sweeps/nominal.yaml on the tasks in $NOMINAL ("TASK:SEEDS:JOBS", default Pendulum:50:10
 #   Cartpole:20:6).
-# $STUDIES picks among franka, shadow, mission (both missions) and nominal (default: all four).
+# $STUDIES picks among franka, shadow, mission (both missions; mission_gpu or mission_cpu alone) and nominal
+# (default: all four).
 # Every BayesSim fit runs on a GPU (device=cuda, round robin), every simulation natively on $THREADS threads.
 # `collect` tars the run directories' results into $OUT/real_robot_studies.tar.gz and prints
 # benchmarks/real_robot_rounds.py's table of each sweep (what each round proposed from, its guard, the gain at the truth).
@@ -51,7 +52,7 @@ masses=$("$PY" -c "from bayessim_exp.api import compose
 print(' '.join(f'task.real_params.{n}=1.0' for n in compose(['task=ShadowHand']).task.parameters if n.startswith('mass_')))")
 
 STUDIES=" ${STUDIES:-franka shadow mission nominal} "
-studied() { [[ $STUDIES == *" $1 "* ]]; }
+studied() { [[ $STUDIES == *" $1 "* || ($1 == mission_* && $STUDIES == *" mission "*) ]]; }
 for escape in ${ESCAPES:-linear nearest}; do
     studied franka && sweep "franka_$escape" task=FrankaCabinet seed=0,1,2 "method.escape=$escape" device=cuda sim=native \
         "sim.nthread=$THREADS" hydra.launcher.n_jobs=3
@@ -59,8 +60,8 @@ for escape in ${ESCAPES:-linear nearest}; do
     studied shadow && sweep "shadow_$escape" task=ShadowHand $masses seed=0,1,2 "method.escape=$escape" device=cuda sim=native \
         "sim.nthread=$THREADS" hydra.launcher.n_jobs=3
 done
-studied mission && sweep mission_gpu task=ShadowHand summarizer=signatory device=cuda seed=0 hydra.launcher.n_jobs=1
-studied mission && OMP_NUM_THREADS=${MISSION_THREADS:-6} sweep mission_cpu task=ShadowHand summarizer=signatory sim=native \
+studied mission_gpu && sweep mission_gpu task=ShadowHand summarizer=signatory device=cuda seed=0 hydra.launcher.n_jobs=1
+studied mission_cpu && OMP_NUM_THREADS=${MISSION_THREADS:-6} sweep mission_cpu task=ShadowHand summarizer=signatory sim=native \
     "sim.nthread=${MISSION_THREADS:-6}" seed=0 hydra.launcher.n_jobs=1
 studied nominal || NOMINAL=" "
 for study in ${NOMINAL:-Pendulum:50:8 Cartpole:20:6}; do

@@ -166,6 +166,12 @@ class Run:
     results: dict
     config: DictConfig  # the run's config.yaml
 
+    @property
+    def rounds_planned(self) -> int:
+        """The rounds the run goes to: `rounds` plus those the method added (results.json; config.yaml's before
+        results.json recorded them)."""
+        return self.results.get("rounds_planned", self.config.rounds)
+
     def round_number(self, round_index: int | None = None) -> int:
         """`round_index` checked against the finished rounds; the last one for None."""
         finished = len(self.results["rounds"])

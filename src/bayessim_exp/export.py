@@ -202,8 +202,8 @@ def main(argv: list[str] | None = None) -> int:
     try:  # every argument and the run dir checked before anything is drawn or built
         run = load_run(args.run_dir)
         handed = run.handed_on(args.round)
-        if args.round is None and len(run.results["rounds"]) < run.config.rounds:
-            raise ValueError(f"{args.run_dir} finished {len(run.results['rounds'])} of its {run.config.rounds} "
+        if args.round is None and len(run.results["rounds"]) < run.rounds_planned:
+            raise ValueError(f"{args.run_dir} finished {len(run.results['rounds'])} of its {run.rounds_planned} "
                              "rounds (still running, stopped or killed): resume it, or name a finished round with "
                              "--round")
         _check(args.samples, mjcf, args.dr_interval)

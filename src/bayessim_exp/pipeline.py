@@ -5,7 +5,9 @@ stages turn simulations and real data into a new distribution over the parameter
 collect -> summarize -> fit -> condition), `score` measures it against the prior and the true
 parameters when known, then the RL component's stages (none with rl=none) train and evaluate a policy on it.
 Every stage writes its artifact atomically before the next starts; a rerun in the same dir skips
-what is there. results.json is rewritten after every round.
+what is there. results.json is rewritten after every round. The method may add rounds past `rounds` after
+the last planned one (BayesSim: an escape under way); results.json's rounds_planned says how many the run
+goes to, so a run killed inside an added round reads as unfinished.
 
 The pipeline builds each object and hands it to those that use it: the components (components.py), then the
 RL component with the round's distribution as a callable (the method's posterior, bound late), then the
@@ -16,6 +18,7 @@ dependencies through the object it belongs to; its context (stages.RoundContext)
 from __future__ import annotations
 
 import dataclasses
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +36,8 @@ from .inference.base import InferenceMethod, handed_on_name
 from .run_config import check_run_config
 from .sim.trajectories import Trajectories
 from .stages import RoundContext, Stage, check_stages, run_stage
+
+log = logging.getLogger(__name__)
 
 
 class Pipeline:
@@ -114,9 +119,15 @@ class Pipeline:
             "prior": {"low": dict(zip(names, map(float, self.task.spec.low))),
                       "high": dict(zip(names, map(float, self.task.spec.high)))},
             "rounds": [],
+            # the rounds this run goes to: `rounds`, plus those the method added after the last planned one
+            # (BayesSim: an escape under way, method.escape_rounds), each with why
+            "rounds_planned": self.rc.rounds,
+            "rounds_added": [],
         }
         try:
-            for r in range(1, self.rc.rounds + 1):
+            r = 0
+            while r < results["rounds_planned"]:
+                r += 1
                 ctx = RoundContext(self.run_dir, r, self.rc.seed, self.tb)
                 seconds = {}
                 for stage in self.stages:
@@ -133,6 +144,10 @@ class Pipeline:
                 results["rounds"].append(record)
                 if "handed_on" in record:  # absent from rounds scored before it was recorded (a resumed run)
                     results["handed_on"] = record["handed_on"]  # what domain randomization gets after the last round
+                if r == results["rounds_planned"] and (why := self.method.added_round(recording)) is not None:
+                    log.warning("%s", why)
+                    results["rounds_planned"] += 1
+                    results["rounds_added"].append({"round": r + 1, "why": why})
                 self.run_dir.write_json("results.json", results)
                 self.tb.scalars(r, _numbers(record))
                 reason = self.method.stop_reason(recording)

@@ -344,6 +344,41 @@ def test_a_round_that_simulated_from_a_read_and_passes_is_handed_on_only_once_th
                                RunDir(tmp_path).load(3, "condition")["posterior"].log_prob(theta))
 
 
+def test_an_escape_under_way_at_the_last_round_goes_on_until_a_round_hands_its_posterior_on(compose, tmp_path,
+                                                                                            monkeypatch):
+    """rounds=1: round 1's real data lie outside its simulations, so it falls back and the next proposal moves to
+    its linear read; round 2 (added) simulates from the read and is provisional; round 3 (added) proposes from round
+    2's posterior and passes. A run killed inside an added round reads as unfinished and resumes to the end."""
+    from bayessim_exp.report.jobs import read_job
+
+    _outside_in(monkeypatch, {1}, others_pass=True)
+    cfg = compose(SMOKE + ["rounds=1", "method.escape_rounds=2"])
+    Pipeline(cfg, tmp_path).run(stop_after=(2, "fit"))
+    assert read_job(tmp_path).status == "unfinished"
+    _outside_in(monkeypatch, set(), others_pass=True)  # the resumed run checks from round 2 on
+    results = Pipeline(cfg, tmp_path).run()
+    assert [r["guard"]["action"] for r in results["rounds"]] == ["fallback", "provisional", "none"]
+    assert results["rounds_planned"] == 3 and [a["round"] for a in results["rounds_added"]] == [2, 3]
+    assert "round 2's posterior" in results["rounds_added"][1]["why"]
+    assert results["handed_on"] == {"round": 3, "name": "round 3's posterior"}
+    assert read_job(tmp_path).status == "finished"
+    assert json.loads((tmp_path / "results.json").read_text())["rounds_planned"] == 3
+
+
+@pytest.mark.parametrize(("outside", "model_failure", "escape_rounds", "rounds"), [
+    ({1, 2, 3}, False, 1, 2),  # at most method.escape_rounds past `rounds`
+    ({1}, True, 2, 1),  # the model failed: the next proposal does not move, no escape is under way
+    ({1}, False, 0, 1),  # escape_rounds=0: exactly `rounds`
+])
+def test_rounds_are_added_only_for_an_escape_under_way_and_at_most_escape_rounds(compose, tmp_path, monkeypatch,
+                                                                               outside, model_failure, escape_rounds,
+                                                                               rounds):
+    _outside_in(monkeypatch, outside, model_failure)
+    results = Pipeline(compose(SMOKE + ["rounds=1", f"method.escape_rounds={escape_rounds}"]), tmp_path).run()
+    assert len(results["rounds"]) == results["rounds_planned"] == rounds
+    assert results["rounds"][-1]["guard"]["action"] == "fallback"
+
+
 @pytest.mark.parametrize("model_failure", [False, True])
 def test_without_escape_or_with_a_model_failure_the_next_round_proposes_as_this_one_did(compose, tmp_path,
                                                                                         monkeypatch, model_failure):

@@ -81,6 +81,10 @@ class InferenceMethod(abc.ABC):
     def stop_reason(self, ctx: RoundContext) -> str | None:
         return None
 
+    def added_round(self, ctx: RoundContext) -> str | None:
+        """Why the run goes on for one more round after ctx's, the last planned one (None: it ends there)."""
+        return None
+
 
 def handed_on_name(source: int) -> str:
     """What a round handed on, in words: round `source`'s posterior, or the prior for 0."""

@@ -106,6 +106,7 @@ def read_job(path: Path) -> Job:
     if results is None:
         return Job(path, overrides, None, expected, "unfinished", "no results.json")
     done = len(results["rounds"])
+    expected = results.get("rounds_planned", expected)  # with the rounds the method added (absent in older runs)
     if done == 0 or (expected is not None and done < expected):
         return Job(path, overrides, results, expected, "unfinished", f"{done} of {expected} rounds")
     return Job(path, overrides, results, expected, "finished")

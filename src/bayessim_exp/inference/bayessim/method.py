@@ -63,6 +63,7 @@ class BayesSimConfig:
     replay_tempering: bool  # widen the posterior until the real trajectories lie among its replays
     on_guard: str  # a round the guard flags: warn | fallback | stop (diagnostics/guard.py)
     escape: str  # where a round whose real data lie outside its simulations proposes the next (escape.py)
+    escape_rounds: int  # rounds added past `rounds` while an escape is under way (BayesSim.added_round)
     importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
     integrators: Any  # auto or a list: the integrators inputs.sims alternate between (components.build_method)
     summary_error: str  # replays | none: noise on simulated summaries where the replays leave features unexplained
@@ -78,6 +79,8 @@ class BayesSimConfig:
             raise ConfigError(f"escape={self.escape!r} not allowed; allowed: {', '.join(ESCAPES)}")
         if self.on_guard not in ACTIONS:
             raise ConfigError(f"on_guard={self.on_guard!r} not allowed; allowed: {', '.join(ACTIONS)}")
+        if self.escape_rounds < 0:
+            raise ConfigError(f"escape_rounds must be >= 0, got {self.escape_rounds}")
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
         check_integrators(self.integrators)
@@ -493,6 +496,22 @@ class BayesSim(InferenceMethod):
         if guard["action"] != "stop":
             return None
         return f"round {ctx.round}: the guard failed (method.on_guard=stop): " + "; ".join(guard["warnings"])
+
+    def added_round(self, ctx: RoundContext) -> str | None:
+        """An escape under way at the last planned round: it handed on nothing of its own (a fallback, or a
+        provisional round) and the next round would propose from where it points (its posterior or a read of its
+        real data), not from where it simulated. Its round after is added, at most method.escape_rounds past
+        `rounds`: the escape's cycle (a read, then the read's round's posterior) takes two rounds, and a run that
+        ends inside it hands on what the last passing round did, the prior on a robot outside the prior's
+        simulations (docs/benchmarks.md, "The real robots at one commit")."""
+        guard, asked, most = ctx.output("guard"), self.inputs.rc.rounds, self.cfg.escape_rounds
+        if (ctx.round >= asked + most or guard["action"] not in ("provisional", "fallback")
+                or guard["proposes_from"] != ctx.round):
+            return None
+        moved = ProposalSource(guard["proposes_from"], guard["proposes_read"]).describe()
+        return (f"round {ctx.round} handed on {handed_on_name(guard['handed_on'])} (its guard: {guard['action']}) "
+                f"and the next round proposes from {moved}: the escape goes on for round {ctx.round + 1} (at most "
+                f"{asked + most}: rounds={asked} plus method.escape_rounds={most})")
 
     def record(self, ctx: RoundContext) -> dict:
         summary, fitted, conditioned, guard = (ctx.output(s) for s in ("summarize", "fit", "condition", "guard"))

@@ -68,7 +68,7 @@ def test_summarize_drops_and_counts_diverged_simulations(tmp_path, monkeypatch):
     ctx = type("Ctx", (), {"output": lambda self, stage: collected})()
     cfg = BayesSimConfig(proposal="prior", finetune=True, max_components=50, parameter_space="box",
                          combination="product", replay_tempering=True, on_guard="fallback",
-                         importance_draws=100_000, escape="nearest", integrators=["model"],
+                         importance_draws=100_000, escape="nearest", escape_rounds=0, integrators=["model"],
                          summary_error="replays", calibrate_on="latest")
     out = BayesSim(cfg, inputs).summarize(ctx)
     assert out["diverged"] == 2

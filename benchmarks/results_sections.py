@@ -166,7 +166,7 @@ class MethodsSection:
         for (task, method), (c, errors) in sorted(studies.items()):
             shares = []
             for level in LEVELS:
-                k, n = c.inside[level][-1]
+                k, n = c.final_inside[level]
                 shares.append(f"{share_text(k, n)}{_verdict(k, n, level)}")
             gains = [g if g is not None else -math.inf for g in c.gains]
             q1, q2, q3 = (float(v) for v in np.quantile(gains, (0.25, 0.5, 0.75)))
@@ -181,7 +181,7 @@ class MethodsSection:
         bullets = []
         for task in sorted({t for t, _ in studies}):
             found = {m: studies[(t, m)] for t, m in studies if t == task}
-            held = ", ".join(f"{m} {c.inside[0.9][-1][0]} of {c.inside[0.9][-1][1]}{_verdict(*c.inside[0.9][-1], 0.9)}"
+            held = ", ".join(f"{m} {c.final_inside[0.9][0]} of {c.final_inside[0.9][1]}{_verdict(*c.final_inside[0.9], 0.9)}"
                              for m, (c, _) in sorted(found.items()))
             closest = min(found, key=lambda m: statistics.median(found[m][1]))
             bullets.append(f"- **{task}**: truths inside the final 90 % region: {held}. Closest to the truths "

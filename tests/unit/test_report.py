@@ -276,6 +276,26 @@ def test_tensorboard_hparams_compare_the_finished_jobs(sweep, capsys):
     assert not list((sweep / "3_way_s1").glob("*.hparams"))  # unfinished: no session
 
 
+def test_the_final_share_reads_each_runs_own_last_round_and_a_run_killed_in_an_added_round_is_unfinished(tmp_path):
+    """Ten runs of `rounds=2`: seven end there with the truth inside (level 0.3); two added a third round (an escape
+    under way, results.json's rounds_planned) and end at level 0.3 after 0.95 in round 2; one was killed inside its
+    added round. The final share is 9 of the 9 finished runs' last rounds, not round 3's 2 of 2; the killed run is
+    left out as unfinished."""
+    sweep = tmp_path / "sweep"
+    for seed in range(10):
+        added = seed >= 7
+        levels = [0.5, 0.95, 0.3] if added and seed < 9 else [0.5, 0.95] if added else [0.5, 0.3]
+        result = {**truth_results(seed, levels, [0.2, 0.7]), "rounds_planned": 3 if added else 2}
+        make_job(sweep, f"{seed}_s{seed}", [f"seed={seed}"], result=result)
+    build_report(sweep, posteriors=False)
+    with (sweep / "report" / "calibration.csv").open() as f:
+        row = next(csv.DictReader(f))
+    assert (row["truths"], row["inside_0.9"], row["rounds_of_0.9"]) == ("9", "9", "9")
+    markdown = (sweep / "report" / "report.md").read_text()
+    assert "90% region 9/9 = 1.00" in markdown and "| 3 | 2/2 = 1.00" in markdown
+    assert "1 unfinished" in markdown
+
+
 def test_pool_reports_a_study_run_in_parts_as_one_configuration(tmp_path):
     """Seeds 0-5 with device=cuda on one machine, 6-11 on the CPU of another: two configurations by their overrides,
     one with --pool (its 12 truths counted together)."""

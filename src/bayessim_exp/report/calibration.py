@@ -43,6 +43,9 @@ class Calibration:
     truths: int  # different truths among them
     left_out: int  # finished jobs without a truth (a fixed or unknown one)
     inside: dict[float, list[tuple[int, int]]]  # level -> per round (truths inside, jobs with that round)
+    # level -> (truths inside, jobs) in each job's final round: runs that added rounds (an escape under way,
+    # method.escape_rounds) end later than the others
+    final_inside: dict[float, tuple[int, int]]
     gains: list[float | None]  # final round's gain at the truth
     guard_failed_final: int
     guard_failed_any: int
@@ -99,6 +102,9 @@ def calibration(jobs: list[Job]) -> Calibration | None:
         for level in LEVELS:
             inside[level].append((sum(v is not None and v < level for v in levels), len(levels)))
     finals = [j.results["rounds"][-1] for j in known]
+    final_levels = [f["truth"]["hpd_level"] for f in finals if f.get("truth")]
+    final_inside = {level: (sum(v is not None and v < level for v in final_levels), len(final_levels))
+                    for level in LEVELS}
     ranks: dict[str, list[float]] = {}
     for final in finals:
         for name, value in final["truth"]["marginal_rank"].items():
@@ -116,6 +122,7 @@ def calibration(jobs: list[Job]) -> Calibration | None:
 
     return Calibration(
         jobs=len(known), truths=truths, left_out=sum(1 for j in jobs if j.results) - len(known), inside=inside,
+        final_inside=final_inside,
         gains=[f.get("log_prob_gain") for f in finals],
         guard_failed_final=sum(guard_failed(f) for f in finals),
         guard_failed_any=sum(any(guard_failed(r) for r in j.results["rounds"]) for j in known),
@@ -139,7 +146,7 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
     gains = [g for g in c.gains if g is not None and math.isfinite(g)]
     zero = len(c.gains) - len(gains)
     quartiles = np.percentile(gains, [25, 50, 75]) if gains else [math.nan] * 3
-    final = {level: c.inside[level][-1] for level in LEVELS}
+    final = c.final_inside
     lines = [f"### `{config}`", "",
              (f"{c.jobs} truths" if c.truths == c.jobs else f"{c.jobs} jobs at {c.truths} different truths")
              + f" ({', '.join(_SOURCES.get(s, s) for s in c.sources)})"
@@ -196,7 +203,7 @@ def sbc_rows(config: str, c: Calibration) -> list[list]:
 def csv_row(config: str, c: Calibration) -> list:
     row: list = [config, c.jobs, c.truths]
     for level in LEVELS:
-        k, n = c.inside[level][-1]
+        k, n = c.final_inside[level]
         row += [k, n, f"{k / n:.4f}", *(f"{v:.4f}" for v in clopper_pearson(k, n))]
     gains = [g for g in c.gains if g is not None and math.isfinite(g)]
     row += [sum(g > 0 for g in gains), len(c.gains) - len(gains), c.guard_failed_final, c.guard_failed_any,

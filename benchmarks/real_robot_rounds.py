@@ -9,7 +9,8 @@ simulations nearest them) and `pass` / `fallback`
 is the guard's verdict, marked `[range]` where a real summary has more features outside the round's training
 simulations' range than all but alpha / n of its held-out ones (the guard's range check since commit 9d7f36a,
 applied where no replay widening is; the records of earlier commits keep what it reads); then the final gain at the
-truth and whether the run meets issue 44's acceptance: some round passed the guard, and no round after the first
+truth with the truth's HPD level in the final distribution (below 0.90: inside its 90 % region) and whether the run
+meets issue 44's acceptance: some round passed the guard, and no round after the first
 simulated from the prior. With --own each round's cell also has its own posterior's gain at the truth and the truth's
 HPD level in it (from the run's round_NNN/condition.pt), whether or not the guard handed it on: what a fallback gave up,
 or kept out.
@@ -62,9 +63,9 @@ def _own(job, r: dict) -> str:
 def rows(sweep: Path, alpha: float, own: bool = False) -> list[str]:
     jobs = [j for j in read_jobs(sweep) if j.results and j.results["rounds"]]
     out = [f"### {sweep.name} ({len(jobs)} runs with a round)", "",
-           "| seed | rounds: proposal from -> guard (gain at the truth) | final gain | a round passed | "
+           "| seed | rounds: proposal from -> guard (gain at the truth) | final gain at HPD level | a round passed | "
            "from the prior after round 1 |", "|---|---|---|---|---|"]
-    finals = []
+    finals, levels = [], []
     for job in jobs:
         rounds = job.results["rounds"]
         cells = []
@@ -73,16 +74,19 @@ def rows(sweep: Path, alpha: float, own: bool = False) -> list[str]:
             gain = r.get("log_prob_gain")
             cells.append(f"{_source(r.get('proposal_from', '?'))} -> {verdict}{_range_mark(r, alpha)} "
                          f"({'n/a' if gain is None else f'{gain:+.1f}'}{_own(job, r) if own else ''})")
-        final = rounds[-1].get("log_prob_gain")
+        final, level = rounds[-1].get("log_prob_gain"), (rounds[-1].get("truth") or {}).get("hpd_level")
         finals.append(final)
+        levels.append(level)
         passed = any(r["guard"]["action"] in ("none", "warn", "provisional") for r in rounds)
         from_prior = sum(r["proposal"] == "prior" for r in rounds[1:])
         status = "" if job.status == "finished" else f" ({job.status})"
         out.append(f"| {job.seed}{status} | {'; '.join(cells)} | "
-                   f"{'n/a' if final is None else f'{final:+.2f}'} | {'yes' if passed else 'no'} | {from_prior} |")
+                   f"{'n/a' if final is None else f'{final:+.2f}'} at {'n/a' if level is None else f'{level:.2f}'} | {'yes' if passed else 'no'} | {from_prior} |")
     known = [g for g in finals if g is not None]
     if known:
         out += ["", f"Final gain: median {statistics.median(known):+.2f}, min {min(known):+.2f} nats over {len(known)} runs."]
+    if read := [v for v in levels if v is not None]:
+        out += [f"Truth inside the final 90 % region: {sum(v < 0.9 for v in read)} of {len(read)} runs."]
     return out + [""]
 
 

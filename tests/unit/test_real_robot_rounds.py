@@ -31,9 +31,11 @@ def test_each_round_s_own_posterior_at_the_truth_whether_handed_on_or_not(tmp_pa
     (run / "round_001").mkdir(parents=True)
     save_state({"posterior": GaussianPrior(torch.zeros(2), torch.ones(2))}, run / "round_001" / "condition.pt")
     results = {"seed": 3, "param_names": ["a", "b"], "true_params": {"a": 0.0, "b": 0.0},
-               "rounds": [_round(1, "fallback", 0.0), _round(2, "none", 1.5)]}
+               "rounds": [_round(1, "fallback", 0.0), {**_round(2, "none", 1.5), "truth": {"hpd_level": 0.3}}]}
     (run / "results.json").write_text(json.dumps(results))
     gain = 5.0 - math.log(2 * math.pi)
     row = next(line for line in real_robot_rounds.rows(tmp_path, 0.01, own=True) if line.startswith("| 3"))
     assert f"prior -> fallback (+0.0; own {gain:+.1f} at 0.00); r1 post -> pass (+1.5) |" in row, row
     assert "; own" not in "".join(real_robot_rounds.rows(tmp_path, 0.01))
+    assert "| +1.50 at 0.30 |" in row and "Truth inside the final 90 % region: 1 of 1 runs." in real_robot_rounds.rows(
+        tmp_path, 0.01)

@@ -51,7 +51,9 @@ def summary_lines(results: dict, out_dir) -> list[str]:
     """A finished run in a few lines: what it handed on (the last round's posterior, an earlier one or the prior),
     that distribution's means and standard deviations, and its gain at the truth where one is known."""
     last, rounds = results["rounds"][-1], len(results["rounds"])
-    lines = [f"{results['run_name']}: {rounds} rounds -> {out_dir}"]
+    added = len(results.get("rounds_added", []))  # older runs lack the key
+    lines = [f"{results['run_name']}: {rounds} rounds"
+             + (f" ({added} added for an escape under way: method.escape_rounds)" if added else "") + f" -> {out_dir}"]
     handed_on = results.get("handed_on")
     if handed_on is not None:
         kept = "" if handed_on["round"] == rounds else (

@@ -363,6 +363,9 @@ def test_an_escape_under_way_at_the_last_round_goes_on_until_a_round_hands_its_p
     assert results["handed_on"] == {"round": 3, "name": "round 3's posterior"}
     assert read_job(tmp_path).status == "finished"
     assert json.loads((tmp_path / "results.json").read_text())["rounds_planned"] == 3
+    from bayessim_exp.__main__ import summary_lines
+
+    assert "3 rounds (2 added for an escape under way: method.escape_rounds)" in summary_lines(results, tmp_path)[0]
 
 
 @pytest.mark.parametrize(("outside", "model_failure", "escape_rounds", "rounds"), [

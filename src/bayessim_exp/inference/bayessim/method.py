@@ -500,10 +500,10 @@ class BayesSim(InferenceMethod):
     def added_round(self, ctx: RoundContext) -> str | None:
         """An escape under way at the last planned round: it handed on nothing of its own (a fallback, or a
         provisional round) and the next round would propose from where it points (its posterior or a read of its
-        real data), not from where it simulated. Its round after is added, at most method.escape_rounds past
+        real data), not from where it simulated. The round after it is added, at most method.escape_rounds past
         `rounds`: the escape's cycle (a read, then the read's round's posterior) takes two rounds, and a run that
         ends inside it hands on what the last passing round did, the prior on a robot outside the prior's
-        simulations (docs/benchmarks.md, "The real robots at one commit")."""
+        simulations (docs/benchmarks.md, "Rounds added for an escape under way")."""
         guard, asked, most = ctx.output("guard"), self.inputs.rc.rounds, self.cfg.escape_rounds
         if (ctx.round >= asked + most or guard["action"] not in ("provisional", "fallback")
                 or guard["proposes_from"] != ctx.round):

@@ -349,6 +349,7 @@ def test_an_escape_under_way_at_the_last_round_goes_on_until_a_round_hands_its_p
     """rounds=1: round 1's real data lie outside its simulations, so it falls back and the next proposal moves to
     its linear read; round 2 (added) simulates from the read and is provisional; round 3 (added) proposes from round
     2's posterior and passes. A run killed inside an added round reads as unfinished and resumes to the end."""
+    from bayessim_exp.__main__ import summary_lines
     from bayessim_exp.report.jobs import read_job
 
     _outside_in(monkeypatch, {1}, others_pass=True)
@@ -363,8 +364,6 @@ def test_an_escape_under_way_at_the_last_round_goes_on_until_a_round_hands_its_p
     assert results["handed_on"] == {"round": 3, "name": "round 3's posterior"}
     assert read_job(tmp_path).status == "finished"
     assert json.loads((tmp_path / "results.json").read_text())["rounds_planned"] == 3
-    from bayessim_exp.__main__ import summary_lines
-
     assert "3 rounds (2 added for an escape under way: method.escape_rounds)" in summary_lines(results, tmp_path)[0]
 
 

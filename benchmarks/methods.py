@@ -14,12 +14,11 @@ Prints mean ± sd over seeds, then each seed's value.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 from collections import defaultdict
 from pathlib import Path
 
-from omegaconf import OmegaConf
+from bayessim_exp.report.jobs import read_job
 
 
 def last_round(results: dict, run_dir: Path) -> dict:
@@ -41,11 +40,9 @@ def finished_runs(dirs: list[Path]) -> dict[tuple[str, str], list[tuple[Path, di
     runs: dict[tuple[str, str], list[tuple[Path, dict]]] = defaultdict(list)
     for d in dirs:
         for path in sorted(d.rglob("results.json")):
-            results = json.loads(path.read_text())
-            planned = results.get("rounds_planned", OmegaConf.load(path.parent / "config.yaml").rounds)
-            finished = len(results["rounds"]) == planned
-            if results.get("true_params") and finished:
-                runs[(results["task"], results["method"])].append((path.parent, results))
+            job = read_job(path.parent)  # finished: every round it planned, the added ones included
+            if job.status == "finished" and job.results.get("true_params"):
+                runs[(job.results["task"], job.results["method"])].append((path.parent, job.results))
     return runs
 
 

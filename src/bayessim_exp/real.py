@@ -32,11 +32,14 @@ from .tasks.base import Task
 log = logging.getLogger(__name__)
 
 
-TRUTHS = ("task", "prior", "nominal")
+TRUTHS = ("task", "prior", "nominal", "corner")
 # real.truth=nominal: a nominal truth is kept this far inside the prior (CDF), where a posterior can score it (a
 # parameter at its box's face, an additive one at the MJCF's 0, has probit coordinate -7.9); moves are x0.5 or x2
 NOMINAL_MARGIN = 0.02
 NOMINAL_MOVES = (0.5, 2.0)
+# real.truth=corner: every parameter this far (CDF) inside one of its prior's tails, the tail and the depth drawn per
+# parameter; seed 0: every parameter at their middle (3 %) of its lower tail
+CORNER_DEPTHS = (0.01, 0.05)
 
 
 class RealSource(Protocol):
@@ -57,7 +60,8 @@ class RealSource(Protocol):
 @dataclasses.dataclass
 class SurrogateConfig:
     per_round: int
-    truth: str  # task: the task's real_params | prior: drawn from the prior | nominal: the MJCF's, a few moved
+    truth: str  # task: the task's real_params | prior: drawn from the prior | nominal: the MJCF's, a few moved |
+    # corner: every parameter deep in one of its prior's tails
 
     def validate(self) -> None:
         if self.per_round < 1:
@@ -76,7 +80,8 @@ class SurrogateReal:
     (truth=prior) a draw from the prior seeded by the run's seed, so that a sweep over seeds is a
     known-truth calibration study (sweeps/calibration.yaml), or (truth=nominal) what a real robot most likely
     is, the MJCF's own values with a few moved per seed (nominal_truth; sweeps/nominal.yaml). Driven by the
-    collect policy, or at random where that policy replays the real trajectories (policy=replay)."""
+    collect policy, or at random where that policy replays the real trajectories (policy=replay). With
+    truth=corner, every parameter in one of its prior's tails (corner_truth; sweeps/corner.yaml)."""
 
     fingerprint = None  # nothing outside the config to bind to the run dir
 
@@ -87,6 +92,8 @@ class SurrogateReal:
             self.true_params: np.ndarray | None = prior.sample((1,), generator=generator)[0].double().numpy()
         elif cfg.truth == "nominal":
             self.true_params = nominal_truth(task, prior, seed, generator)
+        elif cfg.truth == "corner":
+            self.true_params = corner_truth(prior, seed, generator)
         else:
             self.true_params = task.true_params
 
@@ -122,6 +129,22 @@ def nominal_truth(task: Task, prior, seed: int, generator: torch.Generator) -> n
             values[movable[index]] *= factor
     low, high = torch.as_tensor(spec.low, dtype=torch.float64), torch.as_tensor(spec.high, dtype=torch.float64)
     cdf = prior.marginal_cdf(values.clamp(low, high)).clamp(NOMINAL_MARGIN, 1 - NOMINAL_MARGIN)
+    return prior.marginal_icdf(cdf).double().numpy()
+
+
+def corner_truth(prior, seed: int, generator: torch.Generator) -> np.ndarray:
+    """A truth in the prior's joint tail: each parameter at a CDF depth in CORNER_DEPTHS from one of
+    its tails, tail and depth drawn with `generator` (seed 0: every parameter at the middle depth of its lower tail).
+    Each parameter on its own is an ordinary draw, one in 2 / 0.05 = 40 or rarer; all of them together are what a
+    prior-draw study almost never tries (docs/statistics.md, 'Real systems in the prior's tail')."""
+    low, high = CORNER_DEPTHS
+    dim = prior.dim
+    if seed == 0:
+        cdf = torch.full((dim,), (low + high) / 2, dtype=torch.float64)
+    else:
+        depth = low + (high - low) * torch.rand(dim, generator=generator, dtype=torch.float64)
+        upper = torch.rand(dim, generator=generator) < 0.5
+        cdf = torch.where(upper, 1 - depth, depth)
     return prior.marginal_icdf(cdf).double().numpy()
 
 

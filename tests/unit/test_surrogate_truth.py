@@ -43,3 +43,23 @@ def test_nominal_truths_are_the_mjcf_values_then_one_to_three_moved(compose, tmp
         moved = _truth(compose, tmp_path / f"c{seed}", "task=Cartpole", "real.truth=nominal", f"seed={seed}")
         changed = np.flatnonzero(~np.isclose(moved, nominal))
         assert 1 <= len(changed) <= 1 + (seed - 1) % 3 and set(changed) <= {0, 1, 2, 3, 12}, (seed, changed)
+
+
+def test_corner_truths_put_every_parameter_in_one_of_its_priors_tails(compose, tmp_path):
+    """real.truth=corner: seed 0 every parameter at 3 % of its range above the lower face (Cartpole's corner bed,
+    docs/benchmarks.md); later seeds each parameter 1-5 % inside its lower or its upper face, the face drawn per
+    parameter, reproducibly."""
+    cartpole = ["task=Cartpole", "real.truth=corner"]
+    low = np.array([0.3, 0.05, 0.5, 0.01, 0, 0, 0, 0, 0, 0, 0, 0, 5.0])  # conf/task/Cartpole.yaml
+    high = np.array([3.0, 0.5, 1.5, 0.2, 5.0, 0.05, 10.0, 0.5, 1.0, 0.02, 1.0, 0.02, 15.0])
+    np.testing.assert_allclose(_truth(compose, tmp_path / "c0", *cartpole, "seed=0"), low + 0.03 * (high - low))
+    depths = []
+    for seed in range(1, 6):
+        cdf = (_truth(compose, tmp_path / f"c{seed}", *cartpole, f"seed={seed}") - low) / (high - low)
+        depth = np.minimum(cdf, 1 - cdf)
+        assert ((depth >= 0.01 - 1e-9) & (depth <= 0.05 + 1e-9)).all(), (seed, cdf)
+        depths.append(cdf > 0.5)
+    upper = np.array(depths)
+    assert 0.2 < upper.mean() < 0.8 and len({tuple(row) for row in upper}) == 5  # both faces, a new corner each seed
+    np.testing.assert_array_equal(_truth(compose, tmp_path / "again", *cartpole, "seed=2"),
+                                  _truth(compose, tmp_path / "c2", *cartpole, "seed=2"))

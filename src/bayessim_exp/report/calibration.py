@@ -34,6 +34,7 @@ BINS = 10
 MAX_PARAMETERS = 16  # histograms drawn per configuration; the others are counted in the figure's title
 CONFIDENCE = 0.95
 _SOURCES = {"prior": "drawn from the prior", "nominal": "nominal: the MJCF's values, a few moved",
+            "corner": "corner: every parameter 1-5 % inside one of its prior's tails",
             "task": "the task's real_params", "None": "recorded with the data"}
 
 

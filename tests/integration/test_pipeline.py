@@ -496,6 +496,24 @@ def test_a_truth_in_the_priors_tail_that_the_distance_misses_is_caught_by_the_fe
     assert r["log_prob_gain"] == 0.0
 
 
+def test_replays_that_found_nothing_to_widen_for_leave_the_distance_to_the_guard(compose, tmp_path):
+    """Cartpole with every parameter at 3 % of its range above the lower face (real.truth=corner, seed 0), at its
+    defaults (the replay widening on): round 1's real trajectory has summary features outside the training
+    simulations' range, more than any held-out simulation, and its replays found the simulator reproducing it
+    (temperature 1: no model error to widen for). The replays stood in for that check until the widening had to
+    reach something, and round 1 handed on a posterior at -18.4 nats (docs/benchmarks.md); now the guard reads
+    the range as without replays, hands on the prior and proposes round 2 from round 1's linear read."""
+    results = Pipeline(compose(["logging.progress=false", "task=Cartpole", "real.truth=corner", "seed=0", "rounds=1",
+                                "method.escape_rounds=0", "diagnostics.predictive_sims=0"]), tmp_path).run()
+    r = results["rounds"][0]
+    assert r["replay_check"] is not None and r["temperature"] == 1.0, (r["replay_check"], r["temperature"])
+    outside = r["mismatch"]["summaries_outside"]
+    assert outside["p_value"][0] == pytest.approx(1 / (r["held_out"]["count"] + 1)), outside
+    assert r["guard"]["failed"] and r["guard"]["near_real_data_only"] and r["guard"]["handed_on"] == "the prior"
+    assert r["guard"]["proposes_from"] == "round 1's linear read of its real data"
+    assert r["log_prob_gain"] == 0.0
+
+
 def test_coverage_near_the_real_data_is_checked_where_asked(compose, tmp_path):
     """diagnostics.local_sets=60 (off by default: docs/statistics.md): every round records the shares of its
     posterior's draws inside their regions, at the temperature fitted for products of one more trajectory than

@@ -20,8 +20,8 @@ Inputs are what every round measures on its held-out simulations (the last
   out put 2 to 14 features outside the range (p = 0.001) at distances of p = 0.06 to 0.2, and its posteriors
   held the length at the prior's (-188 to -1741 nats at the truth; docs/benchmarks.md); the range test flagged no
   case of the foreign-dynamics benchmark, other integrators included. (BayesSim leaves both out where the real
-  trajectories were replayed and the posterior widened by what the replays leave unexplained: that measures the
-  same difference near the posterior);
+  trajectories were replayed and the posterior widened, to a temperature below 1, by what the replays leave
+  unexplained: that measures the same difference near the posterior);
 - where asked (diagnostics.local_sets), the coverage where the real data put the posterior (local_coverage.py),
   in the same band as the held-out coverage: below it the model is off near the real data even if it is
   calibrated on average.

@@ -418,9 +418,12 @@ class BayesSim(InferenceMethod):
         baseline = "prior" if self._proposal_name(ctx) == "prior" else f"round's proposal ({self._proposal_name(ctx)})"
         # real trajectories replayed, and the posterior widened by what the replays leave unexplained: that comparison
         # with simulations near the posterior stands in for the distance from the training ones (docs/statistics.md),
-        # where the widening reached the real data; one that stopped at its floor still too narrow cannot
-        replayed = conditioned["replay_check"]
-        widened_by_replays = self.cfg.replay_tempering and replayed is not None and not replayed["too_narrow"]
+        # where the widening reached the real data; one that stopped at its floor still too narrow cannot, and one
+        # that found nothing to widen for measured no model error: the distance then says what it says without
+        # replays (Cartpole at 3 % of every range: replays as near as its own simulations', -18.4 nats handed on)
+        replayed, tempering = conditioned["replay_check"], conditioned["tempering"]
+        widened_by_replays = (self.cfg.replay_tempering and replayed is not None and not replayed["too_narrow"]
+                              and tempering is not None and tempering[-1]["temperature"] < 1)
         report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
                                  held_out.get("count", 0), baseline, conditioned["posterior"].effective_sample_size,
                                  local=checked.get("local_coverage"),

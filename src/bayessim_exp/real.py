@@ -38,7 +38,7 @@ TRUTHS = ("task", "prior", "nominal", "corner")
 NOMINAL_MARGIN = 0.02
 NOMINAL_MOVES = (0.5, 2.0)
 # real.truth=corner: every parameter this far (CDF) inside one of its prior's tails, the tail and the depth drawn per
-# parameter; seed 0: every parameter at their middle (3 %) of its lower tail
+# parameter; seed 0: every parameter 3 % (their middle) above its lower face
 CORNER_DEPTHS = (0.01, 0.05)
 
 
@@ -135,8 +135,8 @@ def nominal_truth(task: Task, prior, seed: int, generator: torch.Generator) -> n
 def corner_truth(prior, seed: int, generator: torch.Generator) -> np.ndarray:
     """A truth in the prior's joint tail: each parameter at a CDF depth in CORNER_DEPTHS from one of
     its tails, tail and depth drawn with `generator` (seed 0: every parameter at the middle depth of its lower tail).
-    Each parameter on its own is an ordinary draw, one in 2 / 0.05 = 40 or rarer; all of them together are what a
-    prior-draw study almost never tries (docs/statistics.md, 'Real systems in the prior's tail')."""
+    Each parameter on its own is an ordinary draw (one in ten lies this near a face of its prior); all of them
+    together are what a prior-draw study almost never tries (docs/statistics.md, 'Real systems in the prior's tail')."""
     low, high = CORNER_DEPTHS
     dim = prior.dim
     if seed == 0:

@@ -500,9 +500,9 @@ def test_replays_that_found_nothing_to_widen_for_leave_the_distance_to_the_guard
     """Cartpole with every parameter at 3 % of its range above the lower face (real.truth=corner, seed 0), at its
     defaults (the replay widening on): round 1's real trajectory has summary features outside the training
     simulations' range, more than any held-out simulation, and its replays found the simulator reproducing it
-    (temperature 1: no model error to widen for). The replays stood in for that check until the widening had to
-    reach something, and round 1 handed on a posterior at -18.4 nats (docs/benchmarks.md); now the guard reads
-    the range as without replays, hands on the prior and proposes round 2 from round 1's linear read."""
+    (temperature 1: no model error to widen for). Until eb632c6 the replays stood in for that check there too, and
+    round 1 handed on a posterior at -18.4 nats (docs/benchmarks.md); now the guard reads the range as without
+    replays, hands on the prior and proposes round 2 from round 1's linear read."""
     results = Pipeline(compose(["logging.progress=false", "task=Cartpole", "real.truth=corner", "seed=0", "rounds=1",
                                 "method.escape_rounds=0", "diagnostics.predictive_sims=0"]), tmp_path).run()
     r = results["rounds"][0]

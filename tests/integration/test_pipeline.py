@@ -514,6 +514,26 @@ def test_replays_that_found_nothing_to_widen_for_leave_the_distance_to_the_guard
     assert r["log_prob_gain"] == 0.0
 
 
+def test_a_corner_truth_round_1_cannot_reach_is_reached_by_a_later_round_that_passes(compose, tmp_path):
+    """Issue 44's tail truth on the whole pipeline: Cartpole with every parameter 1-5 % inside one of its prior's
+    tails (real.truth=corner, seed 4), at the task's defaults. Round 1's real trajectory lies outside its
+    simulations and the guard hands on the prior; frozen there, as every fallback was before the escape, the run
+    would end on the prior. Round 2 simulates from round 1's linear read (provisional: its checks see only the
+    read's region), a later round from a posterior trained around the real data, and passes: its posterior is
+    handed on with a positive gain at the truth (+15.2 nats in round 3 on the development machine at eb632c6;
+    docs/benchmarks.md, "Cartpole's corner study")."""
+    results = Pipeline(compose(["logging.progress=false", "task=Cartpole", "real.truth=corner", "seed=4",
+                                "diagnostics.predictive_sims=0"]), tmp_path).run()
+    first, *later = results["rounds"]
+    assert first["guard"]["action"] == "fallback" and first["guard"]["near_real_data_only"], first["guard"]
+    assert first["guard"]["proposes_from"] == "round 1's linear read of its real data"
+    assert later[0]["proposal_from"] == "round 1's linear read of its real data"
+    last = results["rounds"][-1]
+    assert last["guard"]["action"] in ("none", "warn"), [r["guard"] for r in later]
+    assert results["handed_on"]["round"] == last["round"] > 1
+    assert last["log_prob_gain"] > 0, last["log_prob_gain"]
+
+
 def test_coverage_near_the_real_data_is_checked_where_asked(compose, tmp_path):
     """diagnostics.local_sets=60 (off by default: docs/statistics.md): every round records the shares of its
     posterior's draws inside their regions, at the temperature fitted for products of one more trajectory than

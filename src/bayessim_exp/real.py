@@ -60,8 +60,9 @@ class RealSource(Protocol):
 @dataclasses.dataclass
 class SurrogateConfig:
     per_round: int
-    truth: str  # task: the task's real_params | prior: drawn from the prior | nominal: the MJCF's, a few moved |
-    # corner: every parameter deep in one of its prior's tails
+    # task: the task's real_params | prior: drawn from the prior | nominal: the MJCF's, a few moved | corner: every
+    # parameter deep in one of its prior's tails
+    truth: str
 
     def validate(self) -> None:
         if self.per_round < 1:

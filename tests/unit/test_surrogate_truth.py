@@ -53,13 +53,13 @@ def test_corner_truths_put_every_parameter_in_one_of_its_priors_tails(compose, t
     low = np.array([0.3, 0.05, 0.5, 0.01, 0, 0, 0, 0, 0, 0, 0, 0, 5.0])  # conf/task/Cartpole.yaml
     high = np.array([3.0, 0.5, 1.5, 0.2, 5.0, 0.05, 10.0, 0.5, 1.0, 0.02, 1.0, 0.02, 15.0])
     np.testing.assert_allclose(_truth(compose, tmp_path / "c0", *cartpole, "seed=0"), low + 0.03 * (high - low))
-    depths = []
+    faces = []
     for seed in range(1, 6):
         cdf = (_truth(compose, tmp_path / f"c{seed}", *cartpole, f"seed={seed}") - low) / (high - low)
         depth = np.minimum(cdf, 1 - cdf)
         assert ((depth >= 0.01 - 1e-9) & (depth <= 0.05 + 1e-9)).all(), (seed, cdf)
-        depths.append(cdf > 0.5)
-    upper = np.array(depths)
+        faces.append(cdf > 0.5)
+    upper = np.array(faces)
     assert 0.2 < upper.mean() < 0.8 and len({tuple(row) for row in upper}) == 5  # both faces, a new corner each seed
     np.testing.assert_array_equal(_truth(compose, tmp_path / "again", *cartpole, "seed=2"),
                                   _truth(compose, tmp_path / "c2", *cartpole, "seed=2"))

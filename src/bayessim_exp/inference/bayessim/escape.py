@@ -10,9 +10,11 @@ summaries to its parameters (each coordinate's penalty by its error on the held-
   semi-automatic ABC's summaries, Fearnhead and Prangle 2012), their mean and covariance times INFLATE. It moves by
   what the simulations show, a step a round: on FrankaCabinet and ShadowHand the truth stayed inside the 90 % region
   of every round it proposed, but two rounds did not reach the real data;
-- `linear`: the regression read at the real data, its held-out error covariance times INFLATE. It extrapolates:
-  on FrankaCabinet the next round's simulations surrounded the real data, on ShadowHand it put the palm's mass on
-  the box's face (0.1 for 1.0) and the next round's posterior missed the truth behind a guard that passed;
+- `linear`: the regression read at the real data, its held-out error covariance times INFLATE, plus the square of
+  its distance beyond the range of the parameters it was fitted on (`beyond`; the held-out error says nothing out
+  there). It extrapolates: on FrankaCabinet the next round's simulations surrounded the real data, but the hand's
+  mass was read on the box's face, four held-out standard deviations past the truth; on ShadowHand the palm's
+  mass (0.1 for 1.0), and the next round's posterior missed the truth behind a guard that passed;
 - `linear_then_posterior` (the default): `linear` from a round that simulated from anything but a read, the
   round's own posterior from one that simulated from a read: that round's model was trained around its real data,
   where a second linear read extrapolates again from the read's own simulations (ShadowHand: the wrist's and palm's
@@ -41,6 +43,12 @@ INFLATE = 4.0  # a read's covariance is widened so (twice its standard deviation
 MAX_ROWS = 4096
 
 
+def beyond(read: torch.Tensor, u_fit: torch.Tensor) -> torch.Tensor:
+    """[D]: how far the read lies outside the range of the parameters it was fitted on, coordinate by coordinate (0
+    inside). The held-out error says nothing out there; the distance is the least the read may be off by."""
+    return (read - u_fit.max(0).values).clamp_min(0) + (u_fit.min(0).values - read).clamp_min(0)
+
+
 def read_at(x_fit: torch.Tensor, u_fit: torch.Tensor, x_check: torch.Tensor, u_check: torch.Tensor,
             x_real: torch.Tensor, inflate: float = INFLATE, nearest: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """(mean [D], covariance [D, D]) of the parameters u the real summaries x_real [n, F] point to: the ridge
@@ -63,7 +71,7 @@ def read_at(x_fit: torch.Tensor, u_fit: torch.Tensor, x_check: torch.Tensor, u_c
     errors = u_check.double() - check[best, :, columns].T
     read = (design(x_real) @ weights)[best, :, columns].T.mean(0)
     if not nearest:
-        return read, inflate * torch.atleast_2d(torch.cov(errors.T))
+        return read, inflate * torch.atleast_2d(torch.cov(errors.T)) + torch.diag(beyond(read, u_fit) ** 2)
     reads = (design(x_fit) @ weights)[best, :, columns].T
     distance = ((reads - read) / reads.std(0).clamp_min(1e-12)).pow(2).sum(1)
     near = u_fit[distance.argsort()[:max(2 * u_fit.shape[1], int(NEAREST * len(u_fit)))]]

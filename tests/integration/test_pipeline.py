@@ -520,8 +520,9 @@ def test_a_corner_truth_round_1_cannot_reach_is_reached_by_a_later_round_that_pa
     simulations and the guard hands on the prior. Round 2 simulates from round 1's linear read (provisional: its
     checks see only the read's region), a later round from a posterior trained around the real data, and passes:
     its posterior is handed on with a positive gain at the truth (+11.2 nats in round 3 on the development machine
-    since the read widens by its distance beyond its simulations, +15.2 at eb632c6; with method.escape=none rounds 2 and 3 simulate from the prior again and round 3 passes at +7.5;
-    docs/benchmarks.md, "Cartpole's corner study")."""
+    at f21170d, which widens the read by its distance beyond its simulations; +15.2 at eb632c6; with
+    method.escape=none rounds 2 and 3 simulate from the prior again and round 3 passes at +7.5; docs/benchmarks.md,
+    "Cartpole's corner study")."""
     results = Pipeline(compose(["logging.progress=false", "task=Cartpole", "real.truth=corner", "seed=4",
                                 "diagnostics.predictive_sims=0"]), tmp_path).run()
     first, *later = results["rounds"]

@@ -50,8 +50,7 @@ def test_corner_truths_put_every_parameter_in_one_of_its_priors_tails(compose, t
     docs/benchmarks.md); later seeds each parameter 1-5 % inside its lower or its upper face, the face drawn per
     parameter, reproducibly."""
     cartpole = ["task=Cartpole", "real.truth=corner"]
-    low = np.array([0.3, 0.05, 0.5, 0.01, 0, 0, 0, 0, 0, 0, 0, 0, 5.0])  # conf/task/Cartpole.yaml
-    high = np.array([3.0, 0.5, 1.5, 0.2, 5.0, 0.05, 10.0, 0.5, 1.0, 0.02, 1.0, 0.02, 15.0])
+    low, high = np.array([p.range for p in compose(cartpole).task.parameters.values()], dtype=float).T
     np.testing.assert_allclose(_truth(compose, tmp_path / "c0", *cartpole, "seed=0"), low + 0.03 * (high - low))
     faces = []
     for seed in range(1, 6):

@@ -422,8 +422,8 @@ class BayesSim(InferenceMethod):
         # that found nothing to widen for measured no model error: the distance then says what it says without
         # replays (Cartpole at 3 % of every range: replays as near as its own simulations', -18.4 nats handed on)
         replayed, tempering = conditioned["replay_check"], conditioned["tempering"]
-        widened_by_replays = (self.cfg.replay_tempering and replayed is not None and not replayed["too_narrow"]
-                              and tempering is not None and tempering[-1]["temperature"] < 1)
+        # (tempering is None where nothing was replayed or method.replay_tempering is off)
+        widened_by_replays = tempering is not None and tempering[-1]["temperature"] < 1 and not replayed["too_narrow"]
         report = check_posterior(held_out.get("gain_over_proposal"), (ctx.output("fit")["coverage"] or {}).get("hpd"),
                                  held_out.get("count", 0), baseline, conditioned["posterior"].effective_sample_size,
                                  local=checked.get("local_coverage"),

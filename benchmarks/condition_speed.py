@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import importlib
+import importlib.util
 import io
 import pstats
 import subprocess
@@ -50,7 +51,10 @@ def baseline(commit: str, root: Path):
                              capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(root)], input=archive, check=True)
     (root / "src" / "bayessim_exp").rename(root / OLD)
-    sys.path.insert(0, str(root))
+    # imported from its directory by name: its submodules are found through the package's own __path__
+    spec = importlib.util.spec_from_file_location(OLD, root / OLD / "__init__.py")
+    sys.modules[OLD] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sys.modules[OLD])
     return (importlib.import_module(f"{OLD}.inference.bayessim.set_calibration"),
             importlib.import_module(f"{OLD}.inference.bayessim.condition"),
             importlib.import_module(f"{OLD}.distributions.mixture"),

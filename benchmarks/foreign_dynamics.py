@@ -6,7 +6,7 @@
 
 Each case writes n real trajectories (n = 1 and 5) at hidden parameters inside the prior box into an
 npz and runs `python -m bayessim_exp real=file real.path=<npz>` at its defaults (3 rounds of 10,000
-simulations, collect policy `replay`; --quick: 2 rounds of 2,000). Sources (tests/integration/
+simulations, collect policy `replay`; --quick: 2 rounds of 2,000). Sources (bayessim_exp/testing/
 independent_pendulum.py):
 
 - well specified: `ours`, our own simulator (MuJoCo, the task's MJCF);
@@ -36,9 +36,6 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests" / "integration"))
-
 SETTINGS = [(0.7, 0.35), (1.0, 0.5), (1.6, 0.7), (1.3, 0.85)]
 SOURCES = {
     "ours": ("well specified", {}),
@@ -58,13 +55,13 @@ FIT_STEPS = 20
 
 def write_case(source: str, mass: float, length: float, n: int, seed: int, actions: str, path: Path) -> None:
     """The npz real=file reads: our simulator for `ours`, the independent pendulum otherwise."""
-    import independent_pendulum
     import torch
 
     from bayessim_exp import api, registry
     from bayessim_exp.policies import OpenLoopPolicy
     from bayessim_exp.real import save_trajectories
     from bayessim_exp.sim.pool import SimulatorPool
+    from bayessim_exp.testing import independent_pendulum
 
     if source != "ours":
         np.savez(path, **independent_pendulum.simulate(mass, length, n, HORIZON, seed, actions=actions,
@@ -85,11 +82,10 @@ def run_case(case: dict) -> dict:
     import torch
 
     torch.set_num_threads(1)
-    import independent_pendulum
-
     from bayessim_exp import api, registry
     from bayessim_exp.real import load_trajectories
     from bayessim_exp.sim.pool import SimulatorPool
+    from bayessim_exp.testing import independent_pendulum
 
     out = Path(case["dir"])
     # a clean directory: a run resumes from the stage files it finds, which an earlier run's would be
@@ -197,7 +193,7 @@ SECTION = """## Real data from simulators nobody here wrote: the foreign-dynamic
 
 Each case is a whole default run, `python -m bayessim_exp real=file real.path=<npz>` (3 rounds of 10,000
 simulations driven by `policy=replay`, the default with real data), on n = 1 or 5 pendulum trajectories of 50
-steps recorded at hidden parameters inside the prior box by `tests/integration/independent_pendulum.py`:
+steps recorded at hidden parameters inside the prior box by `src/bayessim_exp/testing/independent_pendulum.py`:
 our own simulator (well specified); the same rod physics integrated otherwise (RK4 with 50 substeps,
 semi-implicit Euler at 2 ms, SciPy's DOP853), where the best fit of our model class is near the truth but not
 at it; and physics our model lacks (joint damping 0.1 N m s/rad, Coulomb friction 0.3 N m, a first-order

@@ -1,5 +1,6 @@
 """How far a recorded run's results.json moves under float32 noise, and under small real changes: the measurement
-behind the float tolerance of tests/integration/test_golden_results.py (its docstring has the figures).
+behind the float tolerance of tests/integration/test_golden_results.py (bayessim_exp/testing/golden.py's
+docstring has the figures).
 
 Variants, each a whole run in a process of its own: the reference with OMP_NUM_THREADS=1; OMP_NUM_THREADS=2
 (torch's and numpy's BLAS threads: another summation order); the summaries moved by one float32 rounding each
@@ -24,8 +25,7 @@ from tempfile import TemporaryDirectory
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "integration"))
-from test_golden_results import ABS_TOL, REL_TOL, RUNS, leaves, run  # noqa: E402
+from bayessim_exp.testing.golden import ABS_TOL, REL_TOL, RUNS, leaves, run
 
 CHANGES = ["model.lr=0.00101", "collect.trajectories=299"]  # a 1 % larger step (mdnn); one simulation fewer
 

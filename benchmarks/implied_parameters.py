@@ -23,16 +23,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import torch
-
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests" / "integration"))
-sys.path.insert(0, str(REPO / "benchmarks"))
 
 
 def block_readings(z: torch.Tensor, theta: torch.Tensor, z_real: torch.Tensor, blocks: int) -> dict:
@@ -74,13 +69,12 @@ class Setup:
 
 
 def reading(setup: Setup, source: str, mass: float, length: float, seed: int, args, work: Path) -> dict:
-    import independent_pendulum
-
-    import foreign_dynamics
+    import foreign_dynamics  # benchmarks/foreign_dynamics.py, beside this script
     from bayessim_exp.diagnostics.replay import replay
     from bayessim_exp.diagnostics.replayed_check import standardised
     from bayessim_exp.models.base import constant_columns
     from bayessim_exp.real import load_trajectories
+    from bayessim_exp.testing import independent_pendulum
 
     path = work / f"{source}_{mass}_{length}.npz"
     foreign_dynamics.write_case(source, mass, length, 1, seed, "random", path)

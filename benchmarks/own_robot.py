@@ -31,7 +31,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "tests"))  # tests/robot_logs.py: the LeRobot writer the tests of real=lerobot use
 
 CONF = "docs/examples/so101/conf"
 JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
@@ -56,7 +55,7 @@ def write_log(root: Path, episodes: int, steps: int, seed: int) -> tuple[Path, d
     from bayessim_exp import registry
     from bayessim_exp.policies import OpenLoopPolicy
     from bayessim_exp.sim.pool import SimulatorPool
-    from robot_logs import write_lerobot
+    from bayessim_exp.testing.robot_logs import write_lerobot  # the LeRobot writer the tests of real=lerobot use
 
     task_cfg = yaml.safe_load((REPO / CONF / "task" / "SO101.yaml").read_text())
     task = registry.build("task", task_cfg)

@@ -9,6 +9,8 @@ ScriptSection(name, script, args, quick_args) is a script that prints its sectio
 from __future__ import annotations
 
 import dataclasses
+import functools
+import importlib.util
 import itertools
 import json
 import math
@@ -16,17 +18,17 @@ import statistics
 import sys
 from pathlib import Path
 from string import Template
+from types import ModuleType
 
 import numpy as np
 from omegaconf import OmegaConf
 
+import methods  # benchmarks/methods.py, beside this module
+from bayessim_exp.report.calibration import LEVELS, Calibration, calibration, clopper_pearson, share_text
+from bayessim_exp.report.jobs import read_jobs
+
 ROOT = Path(__file__).resolve().parents[1]
 TEMPLATES = ROOT / "benchmarks" / "results_templates"
-sys.path.insert(0, str(ROOT / "benchmarks"))
-sys.path.insert(0, str(ROOT / "scripts"))
-import methods  # noqa: E402  benchmarks/methods.py
-from bayessim_exp.report.calibration import LEVELS, Calibration, calibration, clopper_pearson, share_text  # noqa: E402
-from bayessim_exp.report.jobs import read_jobs  # noqa: E402
 
 # every job runs on the CPU on one thread, so that 14 jobs share 16 cores without a GPU in the way
 CPU_JOB = ["sim=native", "sim.nthread=1", "device=cpu", "logging.progress=false"]
@@ -58,6 +60,16 @@ class Context:
 
 def template(name: str) -> Template:
     return Template((TEMPLATES / f"{name}.md").read_text())
+
+
+@functools.cache
+def script(name: str) -> ModuleType:
+    """scripts/<name>.py, whose constants and plots the RL sections share with the script their jobs run. Loaded
+    from its file, as scripts/ is no package, and only where a section needs it: the scripts import torch."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def python_command(argv: list[str]) -> str:
@@ -278,8 +290,7 @@ class RlSection:
         return [Job(f"{self.name}/seed{seed}", self._argv(ctx, seed), 330) for seed in seeds]
 
     def render(self, ctx: Context, stamp: str) -> str:
-        from rl_posterior_vs_prior import plot
-
+        plot = script("rl_posterior_vs_prior").plot
         parts = [json.loads((ctx.work / f"seed{s}.json").read_text()) for s in
                  (self.seeds[:1] if ctx.quick else self.seeds)]
         results = {**parts[0], "runs": [run for p in parts for run in p["runs"]]}
@@ -358,16 +369,15 @@ class RobotsSection:
     def _parts(self, ctx: Context):
         """Each job's task, name, settings, seeds and policies (None: all): per seed its baselines (first: two
         trainings without BayesSim before them), then its pairs; a GPU section's quick study in one job."""
-        from rl_on_robots import BASELINES, POSTERIORS
-
+        robots = script("rl_on_robots")
         for task, (settings, seeds) in self._studies(ctx):
             if ctx.quick and self.needs_gpu:  # a job fewer per task: each is a process importing torch
                 yield task, task, settings, seeds, None
                 continue
             for seed in seeds:
-                yield task, f"{task}_baselines_seed{seed}", settings, [seed], BASELINES
+                yield task, f"{task}_baselines_seed{seed}", settings, [seed], robots.BASELINES
                 for setting in settings:
-                    yield task, f"{task}_setting{setting}_seed{seed}", [setting], [seed], POSTERIORS
+                    yield task, f"{task}_setting{setting}_seed{seed}", [setting], [seed], robots.POSTERIORS
 
     def _argv(self, ctx: Context, task: str, settings, seeds, trained_on=None, out: Path | None = None) -> list[str]:
         return [sys.executable, "scripts/rl_on_robots.py", "--task", task, "--settings", *map(str, settings),
@@ -376,28 +386,26 @@ class RobotsSection:
                 "--run-dir", str(ctx.work / "runs")]
 
     def jobs(self, ctx: Context) -> list[Job]:
-        from rl_on_robots import BASELINES
-
+        baselines = script("rl_on_robots").BASELINES
         gpu = self.needs_gpu and not ctx.quick
         # a section's jobs start before those of a section of lower priority, a seed's baselines before its pairs
         return [Job(f"{self.name}/{name}", self._argv(ctx, task, settings, seeds, trained_on, ctx.work / f"{name}.json"),
-                    self.priority + (400 if trained_on == BASELINES else 300), gpu=gpu)
+                    self.priority + (400 if trained_on == baselines else 300), gpu=gpu)
                 for task, name, settings, seeds, trained_on in self._parts(ctx)]
 
     def render(self, ctx: Context, stamp: str) -> str:
-        from rl_on_robots import TRAINED_ON, merge, plot
-
+        robots = script("rl_on_robots")
         per_task: dict[str, dict] = {}
         for task, name, *_ in self._parts(ctx):
             part = json.loads((ctx.work / f"{name}.json").read_text())
             results = per_task.setdefault(task, {**part, "runs": []})
-            results["runs"] = merge(results["runs"], part["runs"])
+            results["runs"] = robots.merge(results["runs"], part["runs"])
         ctx.figures.mkdir(parents=True, exist_ok=True)
         blocks = []
         for task, results in per_task.items():
             (ctx.figures / f"rl_on_robots_{task}.json").write_text(json.dumps(results, indent=1))
-            plot(results, ctx.figures / f"rl_on_robots_{task}.png")
-            blocks.append(self._task_block(ctx, task, results, TRAINED_ON))
+            robots.plot(results, ctx.figures / f"rl_on_robots_{task}.png")
+            blocks.append(self._task_block(ctx, task, results, robots.TRAINED_ON))
         return template(self.name).substitute(stamp=stamp, tasks="\n\n".join(blocks))
 
     def _task_block(self, ctx: Context, task: str, results: dict, trained_on: tuple[str, ...]) -> str:
@@ -496,9 +504,7 @@ def _verdict(k: int, n: int, level: float) -> str:
 
 def _interval(values: list[float]) -> str:
     """Student's t 95 % interval of the mean."""
-    from rl_on_robots import t_interval
-
-    interval = t_interval(values)
+    interval = script("rl_on_robots").t_interval(values)
     return "-" if interval is None else f"[{interval[0]:.1f}, {interval[1]:.1f}]"
 
 
@@ -511,8 +517,7 @@ def _paired(values: list[float], baseline: list[float]) -> str:
 
 def _verdict_text(score: dict[str, list[float]], rounds: int) -> str:
     """Where the last round's posterior helps and where it does not, from the paired intervals."""
-    from rl_on_robots import t_interval
-
+    t_interval = script("rl_on_robots").t_interval
     parts = []
     for baseline, label in (("prior", "uniform randomization"), ("nominal", "the nominal model"),
                             ("posterior_round_1", "round 1's posterior")):

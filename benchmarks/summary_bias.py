@@ -18,14 +18,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import torch
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "integration"))
-
 
 
 def main() -> None:
@@ -40,12 +36,11 @@ def main() -> None:
                     help="noise on the simulations' offset features, in units of their prior spread (0: none)")
     args = ap.parse_args()
 
-    from independent_pendulum import hpd_level
-
     from bayessim_exp import api, registry
     from bayessim_exp.inference.bayessim import method
     from bayessim_exp.policies import RandomPolicy
     from bayessim_exp.real import save_trajectories
+    from bayessim_exp.testing.independent_pendulum import hpd_level
 
     args.out.mkdir(parents=True, exist_ok=True)
     cfg = api.compose([])

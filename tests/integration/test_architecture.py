@@ -7,9 +7,9 @@ import textwrap
 import pytest
 import torch
 from omegaconf import OmegaConf, open_dict
-from run_results import without_seconds
 
 from bayessim_exp.pipeline import Pipeline
+from bayessim_exp.testing.run_results import without_seconds
 
 pytestmark = pytest.mark.slow
 

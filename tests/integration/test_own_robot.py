@@ -20,7 +20,7 @@ import yaml
 from bayessim_exp import registry
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.sim.pool import SimulatorPool
-from robot_logs import write_lerobot
+from bayessim_exp.testing.robot_logs import write_lerobot
 
 pytestmark = pytest.mark.slow
 

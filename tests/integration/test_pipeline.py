@@ -5,7 +5,6 @@ import json
 import numpy as np
 import pytest
 import torch
-from run_results import without_seconds
 
 from bayessim_exp import api, registry
 from bayessim_exp.artifacts import RunDir
@@ -13,6 +12,7 @@ from bayessim_exp.inference.bayessim.method import BayesSim
 from bayessim_exp.pipeline import Pipeline
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.real import save_trajectories
+from bayessim_exp.testing.run_results import without_seconds
 
 pytestmark = pytest.mark.slow
 

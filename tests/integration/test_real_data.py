@@ -1,12 +1,10 @@
-"""Real data from a pendulum nobody on this project wrote (independent_pendulum.py: the rigid-rod ODE by
-RK4, not our MJCF): the posterior covers our model's best fit, and data the model cannot represent
-are either still covered or flagged as a model mismatch."""
+"""Real data from a pendulum nobody on this project wrote (bayessim_exp/testing/independent_pendulum.py: the
+rigid-rod ODE by RK4, not our MJCF): the posterior covers our model's best fit, and data the model cannot
+represent are either still covered or flagged as a model mismatch."""
 
-import independent_pendulum
 import numpy as np
 import pytest
 import torch
-from independent_pendulum import best_fit, best_fits, hpd_level
 
 from bayessim_exp import api, registry
 from bayessim_exp.__main__ import summary_lines
@@ -14,6 +12,8 @@ from bayessim_exp.inference.bayessim.combination import combine
 from bayessim_exp.policies import RandomPolicy
 from bayessim_exp.real import load_trajectories, save_trajectories
 from bayessim_exp.sim.pool import SimulatorPool
+from bayessim_exp.testing import independent_pendulum
+from bayessim_exp.testing.independent_pendulum import best_fit, best_fits, hpd_level
 
 pytestmark = pytest.mark.slow
 

@@ -11,7 +11,7 @@ from bayessim_exp import api, registry
 from bayessim_exp.pipeline import Pipeline
 from bayessim_exp.policies import OpenLoopPolicy
 from bayessim_exp.sim.pool import SimulatorPool
-from robot_logs import write_csv, write_lerobot
+from bayessim_exp.testing.robot_logs import write_csv, write_lerobot
 
 pytestmark = pytest.mark.slow
 

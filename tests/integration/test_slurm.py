@@ -12,7 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
-from run_results import without_seconds
+
+from bayessim_exp.testing.run_results import without_seconds
 
 pytestmark = pytest.mark.slow
 

@@ -11,10 +11,10 @@ import time
 from pathlib import Path
 
 import pytest
-from run_results import without_seconds
 
 from bayessim_exp.artifacts import RunDir
 from bayessim_exp.report.build import build_report
+from bayessim_exp.testing.run_results import without_seconds
 
 pytestmark = pytest.mark.slow
 

@@ -12,7 +12,7 @@ from omegaconf import OmegaConf
 
 from bayessim_exp import registry
 from bayessim_exp.pipeline import Pipeline
-from robot_logs import NAMES, pendulum_frames, write_csv, write_lerobot
+from bayessim_exp.testing.robot_logs import NAMES, pendulum_frames, write_csv, write_lerobot
 
 ROOT = Path(__file__).resolve().parents[2]
 CONF = ROOT / "conf"

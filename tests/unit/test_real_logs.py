@@ -17,7 +17,7 @@ from bayessim_exp.policies import OpenLoopPolicy
 from bayessim_exp.real import load_trajectories, save_trajectories
 from bayessim_exp.recorded import resample
 from bayessim_exp.sim.pool import SimulatorPool
-from robot_logs import NAMES, pendulum_frames, write_csv, write_lerobot
+from bayessim_exp.testing.robot_logs import NAMES, pendulum_frames, write_csv, write_lerobot
 
 pytestmark = pytest.mark.xdist_group("test_real_logs")  # one worker: `recorded` is made once
 STEPS, FAST = 30, 5  # control steps; the fast log's frames per control step (100 Hz for 20 Hz)

@@ -5,17 +5,12 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import torch
 
+import real_robot_rounds  # benchmarks/real_robot_rounds.py (pyproject.toml's pytest pythonpath)
 from bayessim_exp.data_files import save_state
 from bayessim_exp.distributions.independent import GaussianPrior
-
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-import real_robot_rounds  # noqa: E402  benchmarks/real_robot_rounds.py
 
 
 def _round(k: int, action: str, gain: float) -> dict:

@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 import yaml
 
+import results  # benchmarks/results.py (pyproject.toml's pytest pythonpath)
+from results_sections import Context, Job, MethodsSection, RlSection, ScriptSection, SectionError
+
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-import results  # noqa: E402  benchmarks/results.py
-from results_sections import Context, Job, MethodsSection, RlSection, ScriptSection, SectionError  # noqa: E402
 
 
 def test_the_committed_page_is_what_the_assembler_writes_from_it():

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import json
 import logging
-import sys
-from pathlib import Path
 
 import pytest
 
+import auto_choice  # benchmarks/auto_choice.py (pyproject.toml's pytest pythonpath)
 from bayessim_exp import registry
 from bayessim_exp.errors import ConfigError
 from bayessim_exp.sim import auto as sim_auto
@@ -18,9 +17,6 @@ from bayessim_exp.sim import mjx as sim_mjx
 from bayessim_exp.sim import mjx_impl
 from bayessim_exp.sim.mjx_tuning import tuned_model
 from bayessim_exp.sim.native import NativeSimulator
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import auto_choice  # noqa: E402  benchmarks/auto_choice.py
 
 NATIVE_ON_JAX = ["task=Pendulum", "++sim.tuning.native_faster_on=[jax]", "sim.native_below=4"]
 

@@ -20,7 +20,7 @@ import torch
 from scipy.integrate import solve_ivp
 from scipy.optimize import minimize
 
-from bayessim_exp.diagnostics.replay import replay
+from ..diagnostics.replay import replay
 
 GRAVITY = 9.81
 TORQUE_RANGE = 2.0

@@ -1,5 +1,6 @@
 """Write small robot logs in LeRobot's layout (v2.x, v3.0) and as CSV tables, for the tests of real=lerobot and
-real=csv: nothing is downloaded. An episode is {feature: values [frames, width]}, frame i stamped i / fps."""
+real=csv and for benchmarks/own_robot.py: nothing is downloaded. An episode is {feature: values [frames, width]},
+frame i stamped i / fps."""
 
 import csv
 import json

@@ -12,8 +12,8 @@ applied where no replay widening is; the records of earlier commits keep what it
 truth with the truth's HPD level in the final distribution (below 0.90: inside its 90 % region) and whether the run
 meets issue 44's acceptance: some round passed the guard, and no round after the first
 simulated from the prior. With --own each round's cell also has its own posterior's gain at the truth and the truth's
-HPD level in it (from the run's round_NNN/condition.pt), whether or not the guard handed it on: what a fallback gave up,
-or kept out.
+HPD level in it (from the run's round_NNN/condition.pt; also in probit space, where the model's spread is calibrated),
+whether or not the guard handed it on: what a fallback gave up, or kept out.
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ def _range_mark(r: dict, alpha: float) -> str:
 
 
 def _own(job, r: dict) -> str:
-    """'; own +26.0 at 0.60': the round's own posterior's gain at the truth and the truth's HPD level in it."""
+    """'; own +26.0 at 0.60, probit space 0.41': the round's own posterior's gain at the truth and the truth's HPD
+    level in it, in parameter space and (a posterior defined there) in the model's probit space."""
     path = job.path / f"round_{r['round']:03d}" / "condition.pt"
     truth, prior_at_truth = job.results.get("true_params"), r.get("log_prob_true_prior")
     if not path.is_file() or truth is None or prior_at_truth is None:
@@ -56,8 +57,10 @@ def _own(job, r: dict) -> str:
     posterior, names = load_state(path)["posterior"], job.results["param_names"]
     true = np.array([truth[name] for name in names])
     gain = float(posterior.log_prob(torch.as_tensor(true, dtype=torch.float64)[None])) - prior_at_truth
-    level = truth_rank(posterior, names, true, seed=0)["hpd_level"]
-    return f"; own {gain:+.1f} at {'n/a' if level is None else f'{level:.2f}'}"
+    rank = truth_rank(posterior, names, true, seed=0)
+    level, probit = rank["hpd_level"], rank["hpd_level_probit"]
+    return (f"; own {gain:+.1f} at {'n/a' if level is None else f'{level:.2f}'}"
+            + ("" if probit is None else f", probit space {probit:.2f}"))
 
 
 def rows(sweep: Path, alpha: float, own: bool = False) -> list[str]:

@@ -181,3 +181,25 @@ def test_conditionals_no_product_of_which_factorises_are_importance_sampled_from
     draws = post.sample((20000,), generator=torch.Generator().manual_seed(1)).double()
     assert torch.allclose(draws.mean(0), expected.mean, atol=0.03)
     assert torch.allclose(torch.cov(draws.T), expected.covariance, atol=0.03)
+
+
+def test_the_truths_place_is_scored_in_both_spaces_each_against_its_known_answer():
+    """u ~ N(-2, 0.6^2) mapped onto a uniform box, the truth at u* = -1 (z = 1.67): in probit space its HPD level
+    is P(|Z| < 1.67) = 0.904; in parameter space the Jacobian 1 / phi(u) moves the density's peak to u = -3.125
+    (towards the face), so the region holding u* is [-5.25, -1]: 0.952. The spaces differ by 0.048, six times a
+    level's standard error over 4,000 draws."""
+    from scipy.stats import norm
+
+    from bayessim_exp.diagnostics.scoring import truth_rank
+
+    transform = ProbitTransform(BoxUniform(torch.tensor([0.0], dtype=torch.float64),
+                                           torch.tensor([1.0], dtype=torch.float64)))
+    inner = GaussianPrior(torch.tensor([-2.0], dtype=torch.float64), torch.tensor([0.6], dtype=torch.float64))
+    posterior = ProbitPosterior(inner, transform)
+    truth = transform.from_probit(torch.tensor([[-1.0]], dtype=torch.float64))[0].numpy()
+    probit_level = 2 * norm.cdf(1 / 0.6) - 1
+    parameter_level = norm.cdf(1 / 0.6) - norm.cdf(-3.25 / 0.6)
+    levels = [truth_rank(posterior, ["x"], truth, seed) for seed in range(5)]
+    assert abs(sum(r["hpd_level_probit"] for r in levels) / 5 - probit_level) < 0.01, levels
+    assert abs(sum(r["hpd_level"] for r in levels) / 5 - parameter_level) < 0.01, levels
+    assert truth_rank(BoxUniform(torch.zeros(1), torch.ones(1)), ["x"], truth, 0)["hpd_level_probit"] is None

@@ -129,14 +129,17 @@ def test_a_job_with_a_null_gain_is_counted_and_named_not_averaged_away(tmp_path)
     assert "`all`, `log_prob_gain`: `1_s1`: **the final posterior put zero density at the truth**" in markdown
 
 
-def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False, outside=False, source="prior"):
-    """A known-truth job: one round record per HPD level of the truth; `outside`: its last round's real data lay
-    outside the training simulations. Its truth is the task's (seed 0's) unless drawn from the prior or nominal."""
+def truth_results(seed, levels, ranks, gain=1.0, guard_failed=False, flagged=False, outside=False, source="prior",
+                  probit_level=None):
+    """A known-truth job: one round record per HPD level of the truth (and `probit_level` in the model's probit
+    space, None as for a posterior not defined there); `outside`: its last round's real data lay outside the
+    training simulations. Its truth is the task's (seed 0's) unless drawn from the prior or nominal."""
     out = {**results(seed, [gain] * len(levels)), "truth_source": source}
     if source != "task":
         out["true_params"] = {"a": 1.0 + 0.01 * seed, "b": 2.0}
     for record, level in zip(out["rounds"], levels):
-        record["truth"] = {"hpd_level": level, "marginal_rank": dict(zip(["a", "b"], ranks))}
+        record["truth"] = {"hpd_level": level, "marginal_rank": dict(zip(["a", "b"], ranks)),
+                           "hpd_level_probit": probit_level}
         record["guard"] = {"ok": not guard_failed, "failed": guard_failed, "warnings": [],
                            "action": "fallback" if guard_failed else "none",
                            "handed_on": "the prior" if guard_failed else "round 2's posterior"}
@@ -156,7 +159,8 @@ def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_
         level = None if k == 0 else (k + 0.5) / 100
         make_job(sweep, f"{k}_s{k}", [f"seed={k}"], result=truth_results(
             k, [0.95, level], [(k + 0.5) / 100, 0.5], gain=None if k == 0 else 1.0,
-            guard_failed=k < 3, flagged=k == 7, outside=k in (3, 4)))
+            guard_failed=k < 3, flagged=k == 7, outside=k in (3, 4),
+            probit_level=None if k >= 80 else (k + 0.5) / 80))  # 80 record it, 40 below 0.5 and 72 below 0.9
     make_job(sweep, "100_s100", ["seed=100"], result=results(100, [1.0, 1.0]))  # no truth recorded: left out
     build_report(sweep, posteriors=False)
     with (sweep / "report" / "calibration.csv").open() as f:
@@ -168,12 +172,14 @@ def test_the_calibration_section_counts_truths_inside_each_region_per_round(tmp_
     assert (row["zero_density"], row["gain_above_zero"], row["guard_failed_final"], row["fallback_final"],
             row["prior_final"], row["flagged_final"], row["flagged_any"]) == ("1", "99", "3", "3", "3", "1", "1")
     assert (row["outside_rounds"], row["rounds_checked"]) == ("2", "200")
+    assert (row["inside_probit_0.5"], row["rounds_of_probit_0.5"], row["inside_probit_0.9"]) == ("40", "80", "72")
     markdown = (sweep / "report" / "report.md").read_text()
     assert "100 truths (drawn from the prior) (1 finished jobs without a known truth left out)" in markdown
     assert "handed on another distribution (fallback) in 3, the prior in 3" in markdown
     assert "| 1 | 0/100 = 0.00 [0.00, 0.04] | 0/100 = 0.00 [0.00, 0.04] |" in markdown
     assert "90% region 89/100 = 0.89 [0.81, 0.94]" in markdown
     assert "**1 final posterior(s) put zero density at the truth**" in markdown
+    assert "probit space, where its spread is calibrated" in markdown and "90% region 72/80 = 0.90" in markdown
     assert "Real data outside the training simulations: 2/200 = 0.01 [0.00, 0.04] of the rounds checked (the guard fails such a round unless" in markdown
     assert (sweep / "report" / "sbc_ranks_00.png").stat().st_size > 1000
     # a's ranks are evenly spread (uniform), b's all 0.5 (a posterior centred on every truth, too wide)
@@ -215,6 +221,7 @@ def test_nominal_truths_get_the_section_without_uniformity_tests(tmp_path):
     sweep, markdown = truth_sweep(tmp_path, 12, "nominal")
     assert "## Calibration (known truths)" in markdown and "12 truths (nominal" in markdown
     assert "SBC uniformity tests: not computed, the truths were not drawn from the prior" in markdown
+    assert "probit space" not in markdown  # no job recorded a probit-space level (results before it existed)
     assert (sweep / "report" / "calibration.csv").exists() and not (sweep / "report" / "sbc.csv").exists()
 
 

@@ -30,12 +30,20 @@ TRUTH_DRAWS = 4000  # posterior draws the truth is ranked among (a share's stand
 
 def truth_rank(posterior: ParameterDistribution, names: list[str], true: np.ndarray, seed: int) -> dict:
     """{"hpd_level": hpd_level of theta* among TRUTH_DRAWS draws, "marginal_rank": {name: share of draws
-    below theta*_d}}."""
+    below theta*_d}, "hpd_level_probit": the same draws' and theta*'s HPD level in probit space (None for a
+    posterior not defined there)}. The probit map's Jacobian makes the two spaces' regions different sets of the
+    same mass: the model's spread is calibrated, and the guard reads its regions, in probit space
+    (docs/statistics.md, "Which space the regions live in")."""
     t = torch.as_tensor(true, dtype=torch.float64)[None]
     g = torch.Generator().manual_seed(seed)
     draws = posterior.sample((TRUTH_DRAWS,), generator=g).double()
-    return {"hpd_level": hpd_level(posterior, t, draws, g),
-            "marginal_rank": dict(zip(names, (draws < t).double().mean(0).tolist()))}
+    out = {"hpd_level": hpd_level(posterior, t, draws, g),
+           "marginal_rank": dict(zip(names, (draws < t).double().mean(0).tolist())), "hpd_level_probit": None}
+    in_probit = posterior.in_probit_space()
+    if in_probit is not None:
+        to_probit = posterior.transform.to_probit
+        out["hpd_level_probit"] = hpd_level(in_probit, to_probit(t), to_probit(draws), g)
+    return out
 
 
 def quantile_key(level: float) -> str:

@@ -47,6 +47,8 @@ class Calibration:
     # level -> (truths inside, jobs) in each job's final round: runs that added rounds (an escape under way,
     # method.escape_rounds) end later than the others
     final_inside: dict[float, tuple[int, int]]
+    # the same in the model's probit space (results.json's `hpd_level_probit`), over the jobs that record it
+    final_inside_probit: dict[float, tuple[int, int]]
     gains: list[float | None]  # final round's gain at the truth
     guard_failed_final: int
     guard_failed_any: int
@@ -106,6 +108,9 @@ def calibration(jobs: list[Job]) -> Calibration | None:
     final_levels = [f["truth"]["hpd_level"] for f in finals if f.get("truth")]
     final_inside = {level: (sum(v is not None and v < level for v in final_levels), len(final_levels))
                     for level in LEVELS}
+    probit_levels = [f["truth"]["hpd_level_probit"] for f in finals
+                     if f.get("truth") and f["truth"].get("hpd_level_probit") is not None]
+    final_inside_probit = {level: (sum(v < level for v in probit_levels), len(probit_levels)) for level in LEVELS}
     ranks: dict[str, list[float]] = {}
     for final in finals:
         for name, value in final["truth"]["marginal_rank"].items():
@@ -123,7 +128,7 @@ def calibration(jobs: list[Job]) -> Calibration | None:
 
     return Calibration(
         jobs=len(known), truths=truths, left_out=sum(1 for j in jobs if j.results) - len(known), inside=inside,
-        final_inside=final_inside,
+        final_inside=final_inside, final_inside_probit=final_inside_probit,
         gains=[f.get("log_prob_gain") for f in finals],
         guard_failed_final=sum(guard_failed(f) for f in finals),
         guard_failed_any=sum(any(guard_failed(r) for r in j.results["rounds"]) for j in known),
@@ -159,6 +164,12 @@ def markdown(config: str, c: Calibration, figure: Path | None) -> list[str]:
              "|---|" + "---|" * len(LEVELS)]
     for r in range(len(c.inside[LEVELS[0]])):
         lines.append(f"| {r + 1} | " + " | ".join(share_text(*c.inside[level][r]) for level in LEVELS) + " |")
+    if c.final_inside_probit[LEVELS[0]][1]:
+        lines += ["", "The final regions in the model's probit space, where its spread is calibrated and the guard "
+                  "reads them (the probit map's Jacobian makes them other sets of the same mass: docs/statistics.md, "
+                  "'Which space the regions live in'): "
+                  + "; ".join(f"{level:.0%} region {share_text(*c.final_inside_probit[level])}" for level in LEVELS)
+                  + "."]
     lines += ["",
               f"Log-density gain at the truth, final round: quartiles {quartiles[0]:+.2f} / {quartiles[1]:+.2f} / "
               f"{quartiles[2]:+.2f} nats; above zero for {sum(g > 0 for g in gains)} of {len(c.gains)}"
@@ -209,13 +220,14 @@ def csv_row(config: str, c: Calibration) -> list:
     gains = [g for g in c.gains if g is not None and math.isfinite(g)]
     row += [sum(g > 0 for g in gains), len(c.gains) - len(gains), c.guard_failed_final, c.guard_failed_any,
             c.handed_on_other, c.handed_on_prior, c.flagged_final, c.flagged_any, *c.outside_rounds]
-    return row
+    return row + [k for level in LEVELS for k in c.final_inside_probit[level]]
 
 
 CSV_HEADER = ["configuration", "truths", "different_truths",
               *(f"{name}_{level:g}" for level in LEVELS for name in ("inside", "rounds_of", "share", "ci_low", "ci_high")),
               "gain_above_zero", "zero_density", "guard_failed_final", "guard_failed_any", "fallback_final", "prior_final",
-              "flagged_final", "flagged_any", "outside_rounds", "rounds_checked"]
+              "flagged_final", "flagged_any", "outside_rounds", "rounds_checked",
+              *(f"{name}_{level:g}" for level in LEVELS for name in ("inside_probit", "rounds_of_probit"))]
 
 
 def rank_figure(c: Calibration, title: str, path: Path) -> Path:

@@ -238,13 +238,32 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
 
 
 def option_defaults(group: str, name: str) -> dict:
-    """The defaults of a built-in option: its YAML under the package's conf/ (empty if it has none)."""
+    """The defaults of a built-in option: its YAML under the package's conf/ (empty if it has none), with the
+    blocks it shares with other options (conf/model/training) merged where its defaults list names them."""
     path = CONF_DIR / group / f"{name}.yaml"
     if not path.is_file():
         return {}
+    return OmegaConf.to_container(_with_blocks(path), resolve=True)
+
+
+def _with_blocks(path: Path) -> DictConfig:
+    """A YAML's values and, in Hydra's order (_self_ last unless placed), those of the entries of its defaults list
+    within its own group: `<subgroup>@_here_: <option>` and a plain option beside it. Entries naming other groups
+    are left to Hydra: they may name other groups' choices (${task})."""
     values = OmegaConf.load(path)
-    values.pop("defaults", None)  # before resolving: a defaults list may name other groups' choices (${task})
-    return OmegaConf.to_container(values, resolve=True)
+    defaults = OmegaConf.to_container(values.pop("defaults", OmegaConf.create([])))  # unresolved: ${task}
+    merged = OmegaConf.create()
+    for entry in defaults if "_self_" in defaults else [*defaults, "_self_"]:
+        if entry == "_self_":
+            merged = OmegaConf.merge(merged, values)
+        elif isinstance(entry, str):
+            merged = OmegaConf.merge(merged, _with_blocks(path.parent / f"{entry}.yaml"))
+        else:
+            ((key, option),) = entry.items()
+            subgroup, _, package = key.partition("@")
+            if package == "_here_" and " " not in subgroup and not subgroup.startswith("/"):
+                merged = OmegaConf.merge(merged, _with_blocks(path.parent / subgroup / f"{option}.yaml"))
+    return merged
 
 
 def build(group: str, cfg: DictConfig | dict, **deps: Any) -> Any:

@@ -69,10 +69,21 @@ def test_defaults_are_written_once_in_the_yaml(compose, group, name):
                     if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING]
     assert not with_default, f"{params.__name__} repeats defaults of conf/{group}/{registered}.yaml: {with_default}"
     keys = set(yaml.safe_load(text)) - {"name", "defaults"}
-    if registered == name:
-        assert keys == {f.name for f in fields}
+    if registered == name:  # its YAML's keys with those of the blocks it shares (conf/model/training)
+        assert set(registry.option_defaults(group, name)) - {"name"} == {f.name for f in fields}
     else:  # a variant of a registered option (its defaults list names it) writes only what it changes
         assert keys and keys <= {f.name for f in fields}
+
+
+
+@pytest.mark.parametrize("name", [name for group, name in OPTIONS if group == "model"])
+def test_no_model_writes_a_key_of_the_training_block_it_names(name):
+    """A model names conf/model/training after its _self_ (the block's file says why), so a key written in both would
+    take the block's value: a model needing another names a variant of the block (uncalibrated.yaml)."""
+    doc = yaml.safe_load((CONF / "model" / f"{name}.yaml").read_text())
+    if any(isinstance(d, dict) and "training@_here_" in d for d in doc.get("defaults", [])):
+        block = yaml.safe_load((CONF / "model" / "training" / "default.yaml").read_text())
+        assert not set(doc) & set(block)
 
 
 # each task's inference defaults (its YAML's defaults list; measured in docs/tasks.md)

@@ -14,13 +14,12 @@ A policy may also fix how each simulation starts: `plan(n) -> (OpenLoopPolicy, i
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import numpy as np
 import torch
 
 from .errors import ConfigError
-
-SIGNALS = ("constant", "sine", "chirp")
 
 
 class RandomPolicy:
@@ -124,7 +123,7 @@ def replay_policy(cfg: ReplayPolicyConfig, seed: int, recorded=None, task=None, 
 class FixedPolicyConfig:
     """An open-loop signal per action dimension; each list has one entry (all dimensions) or action_dim."""
 
-    signal: str  # constant | sine | chirp
+    signal: Literal["constant", "sine", "chirp"]
     offset: list[float]
     amplitude: list[float]
     frequency: list[float]  # Hz; a chirp's frequency at t = 0
@@ -133,8 +132,6 @@ class FixedPolicyConfig:
     phase: list[float]  # rad
 
     def validate(self) -> None:
-        if self.signal not in SIGNALS:
-            raise ConfigError(f"signal={self.signal!r} not allowed; allowed: {', '.join(SIGNALS)}")
         if self.sweep_seconds <= 0:
             raise ConfigError("sweep_seconds must be > 0")
 

@@ -17,7 +17,7 @@ import io
 import logging
 import zipfile
 from pathlib import Path
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 import torch
@@ -32,7 +32,6 @@ from .tasks.base import Task
 log = logging.getLogger(__name__)
 
 
-TRUTHS = ("task", "prior", "nominal", "corner")
 # real.truth=nominal: a nominal truth is kept this far inside the prior (CDF), where a posterior can score it (a
 # parameter at its box's face, an additive one at the MJCF's 0, has probit coordinate -7.9); moves are x0.5 or x2
 NOMINAL_MARGIN = 0.02
@@ -62,13 +61,11 @@ class SurrogateConfig:
     per_round: int
     # task: the task's real_params | prior: drawn from the prior | nominal: the MJCF's, a few moved | corner: every
     # parameter deep in one of its prior's tails
-    truth: str
+    truth: Literal["task", "prior", "nominal", "corner"]
 
     def validate(self) -> None:
         if self.per_round < 1:
             raise ConfigError(f"per_round must be >= 1, got {self.per_round}")
-        if self.truth not in TRUTHS:
-            raise ConfigError(f"truth={self.truth!r} not allowed; allowed: {', '.join(TRUTHS)}")
 
 
 @dataclasses.dataclass

@@ -19,9 +19,10 @@ import dataclasses
 import difflib
 import functools
 import importlib
+import typing
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
@@ -218,8 +219,8 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
     if missing:
         raise ConfigError(f"{group}={name} has no value for {', '.join(missing)}")
     try:
-        typed = OmegaConf.merge(OmegaConf.structured(spec), container)
-        params = OmegaConf.to_object(typed)
+        typed = OmegaConf.merge(OmegaConf.structured(_schema(spec)), container)
+        params = _typed_as(spec, OmegaConf.to_object(typed))
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None) or "?"
         field = next((f for f in dataclasses.fields(spec) if f.name == str(key).split(".")[0]), None)
@@ -228,13 +229,60 @@ def parse_params(group: str, cfg: DictConfig | dict) -> tuple[str, Any]:
             f"{group}.{key}={getattr(exc, 'value', None)!r} is not allowed for {group}={name}: "
             f"expected {want}. ({exc.msg.splitlines()[0] if hasattr(exc, 'msg') and exc.msg else exc})"
         ) from None
-    check = getattr(params, "validate", None)
-    if check is not None:
-        try:
+    try:
+        _check_choices(params)
+        check = getattr(params, "validate", None)
+        if check is not None:
             check()
-        except ConfigError as exc:
-            raise ConfigError(f"{group}={name}: {exc}") from None
+    except ConfigError as exc:
+        raise ConfigError(f"{group}={name}: {exc}") from None
     return name, params
+
+
+def _choices(spec: type) -> dict[str, tuple]:
+    """The fields of a parameters dataclass typed `Literal[...]`, with the values each allows."""
+    hints = typing.get_type_hints(spec)
+    return {f.name: typing.get_args(hints[f.name]) for f in dataclasses.fields(spec)
+            if typing.get_origin(hints[f.name]) is Literal}
+
+
+@functools.cache
+def _schema(spec: type) -> type:
+    """`spec` as OmegaConf can type it: its Literal fields as str (OmegaConf 2.3 refuses Literal; _check_choices checks
+    them), nested dataclasses likewise."""
+    hints = typing.get_type_hints(spec)
+    fields, changed = [], False
+    for f in dataclasses.fields(spec):
+        tp = hints[f.name]
+        if typing.get_origin(tp) is Literal:
+            tp = str
+        elif dataclasses.is_dataclass(tp):
+            tp = _schema(tp)
+        changed |= tp is not hints[f.name]
+        default = ({"default": f.default} if f.default is not dataclasses.MISSING else
+                   {"default_factory": f.default_factory} if f.default_factory is not dataclasses.MISSING else {})
+        fields.append((f.name, tp, dataclasses.field(**default)))
+    return dataclasses.make_dataclass(spec.__name__, fields) if changed else spec
+
+
+def _typed_as(spec: type, typed: Any) -> Any:
+    """OmegaConf's object of _schema(spec) as a `spec`."""
+    if typed is None or type(typed) is spec:
+        return typed
+    hints = typing.get_type_hints(spec)
+    return spec(**{f.name: _typed_as(hints[f.name], getattr(typed, f.name)) if dataclasses.is_dataclass(hints[f.name])
+                   else getattr(typed, f.name) for f in dataclasses.fields(spec)})
+
+
+def _check_choices(params: Any, prefix: str = "") -> None:
+    """Every Literal field of a parameters dataclass (nested ones too) holds one of its values."""
+    for key, allowed in _choices(type(params)).items():
+        value = getattr(params, key)
+        if value not in allowed:
+            raise ConfigError(f"{prefix}{key}={value!r} not allowed; allowed: {', '.join(allowed)}")
+    for f in dataclasses.fields(params):
+        if dataclasses.is_dataclass(value := getattr(params, f.name)):
+            _check_choices(value, f"{prefix}{f.name}.")
 
 
 def option_defaults(group: str, name: str) -> dict:

@@ -2,19 +2,17 @@
 
 import dataclasses
 import math
-from pathlib import Path
 
 import pytest
 import torch
-from omegaconf import OmegaConf
 from torch.distributions import MultivariateNormal, kl_divergence
 
 from bayessim_exp.errors import ConfigError, PosteriorError
 from bayessim_exp.inference.simopt.discrepancy import Discrepancy
 from bayessim_exp.inference.simopt.reps import Gaussian
 from bayessim_exp.inference.simopt.search import SimOptConfig, initial_gaussian, search
+from bayessim_exp.registry import parse_params
 
-CONF = Path(__file__).parents[2] / "conf" / "method" / "simopt.yaml"
 LOW = torch.tensor([0.1, 1.0, 0.5], dtype=torch.float64)
 HIGH = torch.tensor([1.0, 4.0, 2.0], dtype=torch.float64)
 TRUE = torch.tensor([0.4, 2.5, 1.2], dtype=torch.float64)
@@ -22,9 +20,8 @@ TIME = torch.arange(41, dtype=torch.float64) * 0.1
 
 
 def shipped_config(**changes) -> SimOptConfig:
-    raw = OmegaConf.load(CONF)
-    del raw["name"]
-    return dataclasses.replace(OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(SimOptConfig), raw)), **changes)
+    """conf/method/simopt.yaml's config, checked as a run's (registry.parse_params), with `changes`."""
+    return dataclasses.replace(parse_params("method", {"name": "simopt"})[1], **changes)
 
 
 def oscillator(theta: torch.Tensor) -> torch.Tensor:
@@ -100,4 +97,4 @@ def test_no_finite_cost_is_an_error_naming_the_update():
 ])
 def test_bad_config_is_refused(changes, match):
     with pytest.raises(ConfigError, match=match):
-        shipped_config(**changes).validate()
+        parse_params("method", {"name": "simopt", **changes})

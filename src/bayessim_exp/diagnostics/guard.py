@@ -36,11 +36,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Literal
 
 COVERAGE_TOLERANCE = 0.1
 SAMPLING_Z = 1.645  # one-sided 5 % at a band edge; a calibrated model sits mid-band, far from it
 MIN_EFFECTIVE_SAMPLES = 200
-ACTIONS = ("warn", "fallback", "stop")
+Action = Literal["warn", "fallback", "stop"]  # method.on_guard's choices
 
 
 @dataclasses.dataclass

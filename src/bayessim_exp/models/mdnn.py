@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from typing import Literal
 
 import numpy as np
 import torch
@@ -42,6 +43,8 @@ from .spread import JOINT_ROWS, SpreadScale, joint_factor, member_shares
 _CALIBRATION_ROWS = 4096  # validation pairs the spread is fitted on (plenty for one factor per parameter)
 _CALIBRATION_CHUNK = 512  # pairs per pass: dense precision factors of 100-parameter mixtures are large
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
+Activation = Literal["relu", "tanh", "elu", "silu"]  # ACTIVATIONS' keys
+Covariance = Literal["full", "diagonal"]
 
 
 @data_class
@@ -49,8 +52,8 @@ ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 class MdnnConfig(TrainConfig):
     components: int
     hidden: list[int]
-    activation: str
-    covariance: str  # full | diagonal
+    activation: Activation
+    covariance: Covariance
     ensemble: int  # networks averaged
 
     def validate(self) -> None:
@@ -61,10 +64,6 @@ class MdnnConfig(TrainConfig):
             raise ConfigError(f"components must be an integer >= 1, got {self.components}")
         if not self.hidden or any(h < 1 for h in self.hidden):
             raise ConfigError(f"hidden must be a non-empty list of positive layer sizes, got {self.hidden}")
-        if self.activation not in ACTIVATIONS:
-            raise ConfigError(f"activation {self.activation!r} not allowed; allowed: {', '.join(ACTIVATIONS)}")
-        if self.covariance not in ("full", "diagonal"):
-            raise ConfigError(f"covariance {self.covariance!r} not allowed; allowed: full, diagonal")
 
 
 def input_projection(cfg: TrainConfig, theta_dim: int, x_dim: int, embedding: nn.Module | None) -> RidgeProjection | None:

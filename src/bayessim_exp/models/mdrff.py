@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Literal
 
 import numpy as np
 import torch
@@ -22,39 +23,34 @@ from torch import nn
 from ..data_files import data_class
 from ..errors import ConfigError
 from .base import Standardizer, TrainConfig
-from .mdnn import ACTIVATIONS, MDNN, MemberNetworks, MixtureHead, input_projection
+from .mdnn import ACTIVATIONS, MDNN, Activation, Covariance, MemberNetworks, MixtureHead, input_projection
 from .spread import SpreadScale
 
 # kernel name -> degrees of freedom of the Student-t spectral density (None: Gaussian, the RBF)
 KERNELS = {"rbf": None, "matern12": 1.0, "matern32": 3.0, "matern52": 5.0}
+Kernel = Literal["rbf", "matern12", "matern32", "matern52"]  # KERNELS' keys
 
 
 @data_class
 @dataclasses.dataclass
 class MdrffConfig(TrainConfig):
     features: int  # random Fourier features (cos and sin of features / 2 frequencies)
-    kernel: str  # rbf | matern12 | matern32 | matern52
+    kernel: Kernel
     lengthscale: float  # in units of the standardised summaries
     quasi_random: bool  # scrambled Halton frequencies instead of i.i.d. draws
     components: int
-    covariance: str  # full | diagonal
+    covariance: Covariance
     hidden: list[int]  # layers between features and head; [] is BayesSim's linear head
-    activation: str  # of the hidden layers
+    activation: Activation  # of the hidden layers
 
     def validate(self) -> None:
         super().validate()
         if self.components < 1:
             raise ConfigError(f"components must be an integer >= 1, got {self.components}")
-        if self.covariance not in ("full", "diagonal"):
-            raise ConfigError(f"covariance {self.covariance!r} not allowed; allowed: full, diagonal")
         if any(h < 1 for h in self.hidden):
             raise ConfigError(f"hidden must list positive layer sizes, got {self.hidden}")
-        if self.activation not in ACTIVATIONS:
-            raise ConfigError(f"activation {self.activation!r} not allowed; allowed: {', '.join(ACTIVATIONS)}")
         if self.features < 2 or self.features % 2:
             raise ConfigError(f"features must be an even integer >= 2, got {self.features}")
-        if self.kernel not in KERNELS:
-            raise ConfigError(f"kernel {self.kernel!r} not allowed; allowed: {', '.join(KERNELS)}")
         if not self.lengthscale > 0:
             raise ConfigError(f"lengthscale must be > 0, got {self.lengthscale}")
 

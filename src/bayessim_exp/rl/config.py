@@ -7,11 +7,9 @@ loads only when a run really builds rl=ppo (registry: the factory is rl.componen
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 from ..errors import ConfigError
-
-TRAIN_ON = ("posterior", "prior", "nominal")
-COLLECTORS = ("auto", "compiled", "stepwise")
 
 
 @dataclasses.dataclass
@@ -34,11 +32,9 @@ class PPOConfig:
     hidden: list[int]
     init_log_std: float  # log std of the Gaussian actor at initialisation
     obs_clip: float  # normalised observations are clipped to +-obs_clip
-    collector: str  # auto | compiled (the actor inside MJX's compiled rollout) | stepwise (torchrl's Collector)
+    collector: Literal["auto", "compiled", "stepwise"]  # compiled: the actor inside MJX's compiled rollout; stepwise: torchrl's Collector
 
     def validate(self) -> None:
-        if self.collector not in COLLECTORS:
-            raise ConfigError(f"collector={self.collector!r} not allowed; allowed: {', '.join(COLLECTORS)}")
         if min(self.num_envs, self.rollout_steps, self.epochs, self.minibatch_size) < 1 or not self.hidden:
             raise ConfigError("num_envs, rollout_steps, epochs and minibatch_size must be >= 1, hidden non-empty")
         if self.total_steps < self.num_envs * self.rollout_steps:
@@ -57,14 +53,12 @@ class EvaluateConfig:
 
 @dataclasses.dataclass
 class PPOComponentConfig:
-    train_on: str  # posterior | prior | nominal
+    train_on: Literal["posterior", "prior", "nominal"]
     finetune: bool  # continue the previous round's policy instead of starting afresh
     train: PPOConfig
     evaluate: EvaluateConfig
 
     def validate(self) -> None:
-        if self.train_on not in TRAIN_ON:
-            raise ConfigError(f"train_on={self.train_on!r} not allowed; allowed: {', '.join(TRAIN_ON)}")
         if self.evaluate.episodes < 1 or self.evaluate.video_steps < 0 or self.evaluate.video_size < 16:
             raise ConfigError("need evaluate.episodes >= 1, evaluate.video_steps >= 0, evaluate.video_size >= 16")
         self.train.validate()

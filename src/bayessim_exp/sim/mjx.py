@@ -37,7 +37,7 @@ from ..errors import ConfigError
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec, model_field
 from .base import Policy, Simulator, broke_down
-from .mjx_impl import IMPLS, implementation, resolve_impl
+from .mjx_impl import Impl, implementation, resolve_impl
 from .mjx_setup import import_mjx, jax_setup
 from .mjx_tuning import check_tuning, native_measured_faster
 from .native import NativeConfig, NativeSimulator, simulation_threads
@@ -62,14 +62,12 @@ class MjxConfig:
     cache_dir: Any  # JAX's persistent compilation cache and the traced programs (str), or None: off
     nthread: int  # CPU threads of the host-side set_const and of the native small batches (0: the process's CPUs)
     native_below: int  # batches smaller than this run on native MuJoCo (the tuned model) on CPU threads
-    impl: str  # jax, warp, or auto: warp where warp-lang is installed and the GPU is NVIDIA's
+    impl: Impl  # auto: warp where warp-lang is installed and the GPU is NVIDIA's
     tuning: dict[str, Any]  # the task's model tuned for MJX (mjx_tuning.py; conf/mjx_tuning/<task>.yaml)
 
     def validate(self) -> None:
         if self.max_abs_qvel <= 0 or self.nthread < 0 or self.native_below < 0:
             raise ConfigError("max_abs_qvel must be > 0, nthread and native_below >= 0")
-        if self.impl not in IMPLS:
-            raise ConfigError(f"sim.impl={self.impl!r} not allowed; allowed: {', '.join(IMPLS)}")
         check_tuning(self.tuning)
 
     def runs_natively(self, num_envs: int) -> bool:

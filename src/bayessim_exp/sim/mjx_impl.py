@@ -7,16 +7,16 @@ whether traced programs can be kept across runs."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal
 
 import mujoco
 
 from ..errors import ConfigError
 from ..tasks.base import Task
 from .mjx_setup import import_mjx, leave_out_warp
-from .mjx_tuning import MJX_IMPLS, tuned_model, warp_buffer
+from .mjx_tuning import tuned_model, warp_buffer
 
-IMPLS = ("auto", *MJX_IMPLS)
+Impl = Literal["auto", "jax", "warp"]  # sim.impl: auto, or one of mjx_tuning.MJX_IMPLS
 
 
 def resolve_impl(impl: str, tuning: Mapping[str, Any] | None = None) -> str:

@@ -13,6 +13,7 @@ building the model, fixes it with a dry run so that optimizers see materialised 
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import torch
 from torch import nn
@@ -22,13 +23,11 @@ from ..sim.trajectories import Trajectories
 from .basic import evenly_spaced_times
 from .masking import held_actions, held_states, valid_steps
 
-_ARCHITECTURES = ("conv", "mlp")
-
 
 @dataclasses.dataclass
 class LearnedConfig:
     time_points: int  # K times the trajectory is sampled at
-    architecture: str  # conv: 1D convolutions over the K times, mean-pooled; mlp: on the flat features
+    architecture: Literal["conv", "mlp"]  # conv: 1D convolutions over the K times, mean-pooled; mlp: on the flat features
     hidden: list[int]  # conv channels or MLP widths
     kernel_size: int  # conv only, in time points
     embedding_dim: int  # E
@@ -36,8 +35,6 @@ class LearnedConfig:
     def validate(self) -> None:
         if self.time_points < 2:
             raise ConfigError(f"time_points must be >= 2, got {self.time_points}")
-        if self.architecture not in _ARCHITECTURES:
-            raise ConfigError(f"architecture {self.architecture!r} not allowed; allowed: {', '.join(_ARCHITECTURES)}")
         if not self.hidden or any(h < 1 for h in self.hidden):
             raise ConfigError(f"hidden must be a non-empty list of positive sizes, got {self.hidden}")
         if self.kernel_size < 1:

@@ -13,6 +13,7 @@ when the episode ended. Time runs over [0, 1] for a full episode.
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import pysiglib
 import pysiglib.torch_api as siglib
@@ -23,8 +24,6 @@ from ..sim.trajectories import Trajectories
 from . import tensor_algebra
 from .masking import held_actions, held_states, valid_steps
 
-_BACKENDS = ("pysiglib", "torch")
-
 
 @dataclasses.dataclass
 class SignatureConfig:
@@ -33,15 +32,13 @@ class SignatureConfig:
     time_augment: bool  # prepend the time channel; without it the signature ignores speed
     lead_lag: bool  # (lag, lead) copies of the state-action channels: adds quadratic variation
     basepoint: bool  # start the path at the origin, so the signature sees the initial state
-    backend: str  # pysiglib | torch
+    backend: Literal["pysiglib", "torch"]
     threads: int  # pysiglib CPU threads (-1: all)
     max_features: int  # refuse, before simulating, summaries larger than this
 
     def validate(self) -> None:
         if self.depth < 1:
             raise ConfigError(f"depth must be >= 1, got {self.depth}")
-        if self.backend not in _BACKENDS:
-            raise ConfigError(f"backend {self.backend!r} not allowed; allowed: {', '.join(_BACKENDS)}")
         if self.threads == 0:
             raise ConfigError("threads must be >= 1, or negative to count back from all threads")
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Sequence
+from typing import Literal, get_args
 
 import torch
 
@@ -27,7 +28,8 @@ from .correction import IMPORTANCE_DRAWS, MAX_COMPONENTS, moments, posterior
 
 log = logging.getLogger(__name__)
 
-COMBINATIONS = ("dispersion", "product")
+Combination = Literal["dispersion", "product"]  # method.combination's choices
+COMBINATIONS = get_args(Combination)
 
 
 @dataclasses.dataclass

@@ -28,13 +28,15 @@ docs/benchmarks.md, "Rounds that escape and focus", has the measurements.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import torch
 
 from ...models.base import constant_columns
 from ...models.projection import RidgeSystem
 
 READS = ("linear", "nearest")  # the escapes that read a Gaussian off the real data
-ESCAPES = (*READS, "linear_then_posterior", "posterior", "none")
+Escape = Literal["linear", "nearest", "linear_then_posterior", "posterior", "none"]  # method.escape's choices
 NEAREST = 0.02  # the share of the fitted simulations whose linear reads lie nearest the real data's (nearest)
 PENALTIES = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5)  # on standardised summaries, each parameter's by held-out error
 INFLATE = 4.0  # a read's covariance is widened so (twice its standard deviation) that its region holds the truth

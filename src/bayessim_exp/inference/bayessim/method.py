@@ -20,7 +20,7 @@ from typing import Any
 import torch
 
 from ...diagnostics.coverage import expected_coverage, held_out_gain
-from ...diagnostics.guard import ACTIONS, check_posterior
+from ...diagnostics.guard import Action, check_posterior
 from ...diagnostics.identifiability import linear_read, sensitivity
 from ...diagnostics.mismatch import flag_outside, mismatch_report, summaries_outside
 from ...diagnostics.predictive import predictive_distances
@@ -35,20 +35,20 @@ from ...sim.integrators import check_names as check_integrators
 from ...sim.trajectories import Trajectories
 from ...stages import RoundContext, Stage, stage_seed
 from ..base import InferenceMethod, MethodInputs, handed_on_name, real_trajectories
-from .combination import COMBINATIONS
+from .combination import Combination
 from .condition import condition, tempered_product, tempered_products
-from .escape import ESCAPES, READS, read_at
+from .escape import READS, Escape, read_at
 from .handed_on import ProposalSource, handed_on, handed_on_round, posterior_of, proposal_source
 from .identifiability_checks import log_findings, nominal_point, summaries_at
 from .model_checks import coverage_near_real, extrapolation
-from .parameter_space import PARAMETER_SPACES, probit_transform
+from .parameter_space import ParameterSpace, probit_transform
 from .proposals import ProposalInputs, proposal_named
 from .replay_tempering import temper_to_replays
 from .set_calibration import SetPosteriors, set_importance_draws, simulated_sets_temperature
 from .simulate import predictive_summaries, simulate_as_driven, without_noise
-from .summary_error import MODES as SUMMARY_ERRORS
+from .summary_error import Mode as SummaryErrorMode
 from .summary_error import SummaryError
-from .training_data import CALIBRATE_ON, calibration_rows, exact_training_rows, held_out_count, split, summarized
+from .training_data import CalibrateOn, calibration_rows, exact_training_rows, held_out_count, split, summarized
 
 log = logging.getLogger(__name__)
 
@@ -58,36 +58,24 @@ class BayesSimConfig:
     proposal: str  # prior | posterior | gaussian | truncated | a plugin's (proposals.py)
     finetune: bool  # continue training the previous round's model (false: re-initialise)
     max_components: int  # mixture components kept when combining several real trajectories
-    parameter_space: str  # auto | probit | box: what the model is fitted in (distributions/probit.py)
-    combination: str  # several real trajectories: dispersion | product (combination.py)
+    parameter_space: ParameterSpace  # what the model is fitted in (distributions/probit.py)
+    combination: Combination  # of several real trajectories (combination.py)
     replay_tempering: bool  # widen the posterior until the real trajectories lie among its replays
-    on_guard: str  # a round the guard flags: warn | fallback | stop (diagnostics/guard.py)
-    escape: str  # where a round whose real data lie outside its simulations proposes the next (escape.py)
+    on_guard: Action  # what a round the guard flags hands on (diagnostics/guard.py)
+    escape: Escape  # where a round whose real data lie outside its simulations proposes the next (escape.py)
     escape_rounds: int  # rounds added past `rounds` while an escape is under way (BayesSim.added_round)
     importance_draws: int  # base draws of a posterior without a closed form (flows; correction.py)
     integrators: Any  # auto or a list: the integrators inputs.sims alternate between (components.build_method)
-    summary_error: str  # replays | none: noise on simulated summaries where the replays leave features unexplained
-    calibrate_on: str  # latest | all: the pooled rounds' validation pairs the model's spread is calibrated on
+    summary_error: SummaryErrorMode  # noise on simulated summaries where the replays leave features unexplained
+    calibrate_on: CalibrateOn  # the pooled rounds' validation pairs the model's spread is calibrated on
 
     def validate(self) -> None:
-        if self.parameter_space not in PARAMETER_SPACES:
-            raise ConfigError(f"parameter_space={self.parameter_space!r} not allowed; allowed: {', '.join(PARAMETER_SPACES)}")
         proposal_named(self.proposal)
-        if self.combination not in COMBINATIONS:
-            raise ConfigError(f"combination={self.combination!r} not allowed; allowed: {', '.join(COMBINATIONS)}")
-        if self.escape not in ESCAPES:
-            raise ConfigError(f"escape={self.escape!r} not allowed; allowed: {', '.join(ESCAPES)}")
-        if self.on_guard not in ACTIONS:
-            raise ConfigError(f"on_guard={self.on_guard!r} not allowed; allowed: {', '.join(ACTIONS)}")
         if self.escape_rounds < 0:
             raise ConfigError(f"escape_rounds must be >= 0, got {self.escape_rounds}")
         if self.max_components < 1:
             raise ConfigError(f"max_components must be >= 1, got {self.max_components}")
         check_integrators(self.integrators)
-        if self.summary_error not in SUMMARY_ERRORS:
-            raise ConfigError(f"summary_error={self.summary_error!r} not allowed; allowed: {', '.join(SUMMARY_ERRORS)}")
-        if self.calibrate_on not in CALIBRATE_ON:
-            raise ConfigError(f"calibrate_on={self.calibrate_on!r} not allowed; allowed: {', '.join(CALIBRATE_ON)}")
         if self.importance_draws < 1000:
             raise ConfigError(f"importance_draws must be >= 1000 (the importance-sampled posterior's base draws), "
                               f"got {self.importance_draws}")

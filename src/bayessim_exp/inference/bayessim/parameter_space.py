@@ -4,6 +4,7 @@ the normal quantile (distributions/probit.py; posteriors stay on the box), or pa
 from __future__ import annotations
 
 import logging
+from typing import Literal
 
 from ...distributions.base import ParameterDistribution
 from ...distributions.probit import ProbitTransform
@@ -12,7 +13,7 @@ from ...errors import ConfigError
 log = logging.getLogger(__name__)
 
 # probit; box: parameter units; auto: probit where the prior allows it (independent, on a box), else box
-PARAMETER_SPACES = ("auto", "probit", "box")
+ParameterSpace = Literal["auto", "probit", "box"]
 
 
 def probit_transform(space: str, prior: ParameterDistribution) -> ProbitTransform | None:

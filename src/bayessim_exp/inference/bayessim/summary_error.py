@@ -18,10 +18,11 @@ mismatch. docs/statistics.md has the measurements.
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import torch
 
-MODES = ("replays", "none")
+Mode = Literal["replays", "none"]  # method.summary_error's choices
 
 
 @dataclasses.dataclass

@@ -5,6 +5,7 @@ replay the real actions as they were driven (collect: kept for the spread's cali
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Literal, get_args
 
 import torch
 
@@ -39,7 +40,8 @@ def exact_training_rows(summary: dict, fraction: float) -> torch.Tensor:
     return exact[: n - held_out_count(n, fraction)]
 
 
-CALIBRATE_ON = ("latest", "all")  # method.calibrate_on's choices
+CalibrateOn = Literal["latest", "all"]  # method.calibrate_on's choices
+CALIBRATE_ON = get_args(CalibrateOn)
 
 
 def calibration_rows(total: int, latest: int, calibrate_on: str) -> torch.Tensor:

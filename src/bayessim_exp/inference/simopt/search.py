@@ -13,14 +13,13 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
+from typing import Literal
 
 import torch
 
 from ...errors import ConfigError, PosteriorError
 from .discrepancy import DiscrepancyConfig
 from .reps import Gaussian, floor_covariance, reps_update
-
-ROLLOUTS = ("closed_loop", "recorded")
 
 
 @dataclasses.dataclass
@@ -34,7 +33,7 @@ class SimOptConfig:
     # closed_loop: run the round's policy on the simulator; recorded: replay the real trajectory's actions
     # (the same thing for a policy that ignores the state, such as the random collect policy, with the
     # real noise instead of fresh noise)
-    rollout: str
+    rollout: Literal["closed_loop", "recorded"]
     discrepancy: DiscrepancyConfig
 
     def validate(self) -> None:
@@ -44,8 +43,6 @@ class SimOptConfig:
             raise ConfigError(f"need kl_bound > 0 and min_temperature > 0, got {self.kl_bound}, {self.min_temperature}")
         if not 0 < self.min_std < 0.25:  # a uniform prior's own std is 0.29 of its range
             raise ConfigError(f"min_std is a fraction of the prior range in (0, 0.25), got {self.min_std}")
-        if self.rollout not in ROLLOUTS:
-            raise ConfigError(f"rollout={self.rollout!r} not allowed; allowed: {', '.join(ROLLOUTS)}")
         self.discrepancy.validate()
 
 

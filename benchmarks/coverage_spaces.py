@@ -38,6 +38,7 @@ def main() -> None:
 
     from bayessim_exp import api
     from bayessim_exp.components import build_components
+    from bayessim_exp.data_files import load_state
     from bayessim_exp.diagnostics.coverage import credibility_ranks
     from bayessim_exp.distributions.hpd import hpd_level
     from bayessim_exp.distributions.probit import ProbitPosterior, ProbitTransform
@@ -49,8 +50,8 @@ def main() -> None:
     if not (args.out / "round_001" / "fit.pt").exists():
         pipeline.run(stop_after=(1, "fit"))
     # artifacts this run just wrote (pipeline.RunDir), not files from elsewhere
-    fitted = torch.load(args.out / "round_001" / "fit.pt", weights_only=False)
-    summaries = torch.load(args.out / "round_001" / "summarize.pt", weights_only=False)
+    fitted = load_state(args.out / "round_001" / "fit.pt")
+    summaries = load_state(args.out / "round_001" / "summarize.pt")
     comp = build_components(cfg, pipeline.rc)
     model = comp.model()
     model.load_state_dict(fitted["model"])
@@ -80,10 +81,11 @@ def main() -> None:
 
 def exact_replays(comp, out: Path, count: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
     """count prior draws and the summaries of their simulations replaying round 1's real trajectories without noise."""
+    from bayessim_exp.data_files import load_state
     from bayessim_exp.policies import ReplayPolicy, ReplayPolicyConfig
     from bayessim_exp.sim.trajectories import Trajectories
 
-    recorded = Trajectories(**torch.load(out / "round_001" / "real.pt", weights_only=False)["traj"])
+    recorded = Trajectories(**load_state(out / "round_001" / "real.pt")["traj"])
     theta = comp.prior.sample((count,), generator=torch.Generator().manual_seed(seed)).double()
     replays = comp.sims.rollout(theta, ReplayPolicy(ReplayPolicyConfig(0.0), recorded, comp.task, seed),
                                 recorded.horizon, seed=seed)

@@ -41,6 +41,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from bayessim_exp import api, registry  # noqa: E402
+from bayessim_exp.policies import Policy  # noqa: E402
 from bayessim_exp.sim.integrators import RECORDED_DATA  # noqa: E402
 from bayessim_exp.sim.mjx import MjxConfig, MjxSimulator  # noqa: E402
 from bayessim_exp.sim.mjx_impl import resolve_impl  # noqa: E402
@@ -48,7 +49,7 @@ from bayessim_exp.sim.mjx_setup import jax_setup  # noqa: E402
 from bayessim_exp.sim.native import NativeConfig, NativeSimulator  # noqa: E402
 
 
-class OpenLoopRandom:
+class OpenLoopRandom(Policy):
     """Uniform random actions drawn where the simulator runs (the collect policy's distribution)."""
 
     def __init__(self, action_dim: int, device: torch.device, seed: int = 0):

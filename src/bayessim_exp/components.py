@@ -21,10 +21,10 @@ from .errors import ConfigError
 from .inference.base import InferenceMethod, MethodInputs, PolicyFactory
 from .machine import fit_to_machine
 from .models.base import PosteriorModel
+from .policies import Policy, as_policy
 from .real import RealSource
 from .run_config import RunConfig
 from .sim import integrators
-from .sim.base import Policy
 from .sim.pool import SimulatorPool
 from .sim.trajectories import Trajectories
 from .stages import RoundContext
@@ -51,8 +51,8 @@ class CollectPolicies:
     def __call__(self, seed: int, ctx: RoundContext | None = None) -> Policy:
         actor = self.actor(ctx) if ctx is not None else None
         recorded = Trajectories(**ctx.output("real")["traj"]) if ctx is not None and ctx.has("real") else None
-        return self.build(action_dim=self.task.action_dim, seed=seed, control_dt=self.task.cfg.control_dt,
-                          actor=actor, recorded=recorded, task=self.task)
+        return as_policy(self.build(action_dim=self.task.action_dim, seed=seed, control_dt=self.task.cfg.control_dt,
+                                    actor=actor, recorded=recorded, task=self.task))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -7,13 +7,15 @@ rl=none), `recorded` the real trajectories recorded so far (None before the firs
 "Your own components"). `rl` and `rl_randomized` act with torchrl, so their factories are in
 rl/actor_policy.py; their configs are here, where checking them loads no torchrl.
 
-A policy may also fix how each simulation starts: `plan(n) -> (OpenLoopPolicy, initial states or None)`
-(the replay policy); SimulatorPool.rollout asks for that plan before simulating.
+Every policy is a `Policy`, which declares what a policy may do beyond acting step by step, each member with
+the default of one that only acts; a factory's object that is not one (a plugin's) is taken as such (`as_policy`).
 """
 
 from __future__ import annotations
 
+import abc
 import dataclasses
+from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
@@ -22,7 +24,45 @@ import torch
 from .errors import ConfigError
 
 
-class RandomPolicy:
+class Policy(abc.ABC):
+    """Batched `act(obs [N, S], t) -> actions [N, A]` in [-1, 1], and the optional members simulators and stages
+    read instead of probing for them."""
+
+    # plan(n) -> (OpenLoopPolicy, initial states or None): how each of n simulations starts and is driven (ReplayPolicy);
+    # SimulatorPool.rollout asks for it before simulating. None: act drives them from the given or drawn states
+    plan: Callable[[int], tuple[OpenLoopPolicy, dict[str, np.ndarray] | None]] | None = None
+    # open_loop_actions(n, horizon) -> [n, horizon, A]: the actions `horizon` calls of act would give, where they never
+    # read the observations, so a simulator can run the whole rollout in one compiled loop. None: closed loop
+    open_loop_actions: Callable[[int, int], torch.Tensor] | None = None
+
+    @abc.abstractmethod
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor: ...
+
+    def select(self, rows: torch.Tensor | slice) -> Policy:
+        """The policy of some slots only (a chunk of a long rollout): itself where it acts on any rows it is given."""
+        return self
+
+    def without_noise(self) -> Policy | None:
+        """The policy as the real data were driven, where it adds noise to them (ReplayPolicy); None where it adds none."""
+        return None
+
+
+class _Acting(Policy):
+    """An object with `act` alone, as a Policy."""
+
+    def __init__(self, acting):
+        self.acting = acting
+
+    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
+        return self.acting.act(obs, t)
+
+
+def as_policy(policy) -> Policy:
+    """A factory's policy; one that is no Policy (README, 'Your own components': an object with `act`) only acts."""
+    return policy if isinstance(policy, Policy) else _Acting(policy)
+
+
+class RandomPolicy(Policy):
     """Independent uniform actions over the normalised bounds at every step."""
 
     def __init__(self, action_dim: int, seed: int):
@@ -33,8 +73,6 @@ class RandomPolicy:
         return torch.rand(obs.shape[0], self.action_dim, generator=self.generator) * 2 - 1
 
     def open_loop_actions(self, n: int, horizon: int) -> torch.Tensor:
-        """The actions [n, horizon, A] that `horizon` calls of act() would give (the observations are
-        never read), so a simulator can run the whole rollout in one compiled loop."""
         dummy = torch.empty(n, 0)
         return torch.stack([self.act(dummy, t) for t in range(horizon)], 1)
 
@@ -48,7 +86,7 @@ def random_policy(cfg: RandomPolicyConfig, action_dim: int, seed: int, **_: obje
     return RandomPolicy(action_dim, seed)
 
 
-class OpenLoopPolicy:
+class OpenLoopPolicy(Policy):
     """Recorded actions [N, T, A] played step by step, whatever the observations (replaying real
     trajectories in simulation), row n in slot n."""
 
@@ -64,7 +102,6 @@ class OpenLoopPolicy:
         return self.actions[:, :horizon]
 
     def select(self, rows: torch.Tensor | slice) -> OpenLoopPolicy:
-        """The policy of some slots only (a chunk of a long rollout)."""
         return OpenLoopPolicy(self.actions[rows])
 
 
@@ -77,7 +114,7 @@ class ReplayPolicyConfig:
             raise ConfigError(f"action_noise must be >= 0, got {self.action_noise}")
 
 
-class ReplayPolicy:
+class ReplayPolicy(Policy):
     """Every simulation driven like a real trajectory: one drawn at random among the recorded ones, its
     initial state (where the task maps an observation to a state; else the task's reset distribution)
     and its actions, perturbed by `action_noise` so that the simulated summaries vary around the real
@@ -136,7 +173,7 @@ class FixedPolicyConfig:
             raise ConfigError("sweep_seconds must be > 0")
 
 
-class FixedPolicy:
+class FixedPolicy(Policy):
     """offset + amplitude * sin(angle(t)): constant = offset + amplitude (phase unused), sine: 2 pi f t + phase,
     chirp: a linear frequency sweep + phase."""
 

@@ -11,6 +11,7 @@ import torch
 
 from bayessim_exp.errors import ConfigError
 from bayessim_exp.pipeline import Pipeline
+from bayessim_exp.policies import Policy
 from bayessim_exp.sim import integrators
 from bayessim_exp.sim.native import NativeConfig, NativeSimulator
 from bayessim_exp.sim.pool import SimulatorPool
@@ -18,7 +19,7 @@ from bayessim_exp.sim.pool import SimulatorPool
 CONFIG = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
 
 
-class Zeros:
+class Zeros(Policy):
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         return torch.zeros(obs.shape[0], 1)
 

@@ -6,13 +6,14 @@ import numpy as np
 import torch
 
 from bayessim_exp import registry
+from bayessim_exp.policies import Policy
 from bayessim_exp.sim.native import NativeConfig, NativeSimulator
 from bayessim_exp.sim.pool import SimulatorPool
 
 CONFIG = NativeConfig(nthread=1, max_abs_qvel=1.0e4)
 
 
-class Zeros:
+class Zeros(Policy):
     def act(self, obs: torch.Tensor, t: int) -> torch.Tensor:
         return torch.zeros(obs.shape[0], 1)
 

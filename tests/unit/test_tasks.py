@@ -13,6 +13,7 @@ import torch
 
 from bayessim_exp import registry
 from bayessim_exp.errors import ConfigError
+from bayessim_exp.policies import Policy
 
 TASKS = registry.names("task")
 
@@ -34,7 +35,7 @@ def fixed_actions(horizon: int, dim: int) -> np.ndarray:
     return 0.8 * np.sin(0.7 * t + 1.3 * k)
 
 
-class Replay:
+class Replay(Policy):
     def __init__(self, actions: np.ndarray):
         self.actions = torch.as_tensor(actions, dtype=torch.float32)
 

@@ -34,8 +34,8 @@ from ..stages import RoundContext, Stage
 
 if TYPE_CHECKING:
     from ..models.base import PosteriorModel
+    from ..policies import Policy
     from ..run_config import RunConfig
-    from ..sim.base import Policy
     from ..sim.pool import SimulatorPool
     from ..summarizers.base import Summarizer
     from ..tasks.base import Task

@@ -9,12 +9,12 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from ..policies import RandomizedRLPolicyConfig, RandomPolicy, RLPolicyConfig
+from ..policies import Policy, RandomizedRLPolicyConfig, RandomPolicy, RLPolicyConfig
 
 log = logging.getLogger(__name__)
 
 
-class ActorPolicy:
+class ActorPolicy(Policy):
     """A trained torchrl actor's mean action; with probability `random_share` a slot's action is uniform instead."""
 
     def __init__(self, actor, action_dim: int, seed: int, random_share: float):

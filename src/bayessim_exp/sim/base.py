@@ -17,19 +17,16 @@ from __future__ import annotations
 import abc
 import dataclasses
 from collections.abc import Sequence
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import torch
 
 from ..errors import ConfigError
+from ..policies import Policy
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec
 from .trajectories import Trajectories
-
-
-class Policy(Protocol):
-    def act(self, obs: torch.Tensor, t: int) -> torch.Tensor: ...
 
 
 @dataclasses.dataclass

@@ -34,9 +34,10 @@ import torch
 from mujoco import batch as mjbatch
 
 from ..errors import ConfigError
+from ..policies import Policy
 from ..tasks.base import Task
 from ..tasks.params import ParamSpec, model_field
-from .base import Policy, Simulator, broke_down
+from .base import Simulator, broke_down
 from .mjx_impl import Impl, implementation, resolve_impl
 from .mjx_setup import import_mjx, jax_setup
 from .mjx_tuning import check_tuning, native_measured_faster
@@ -299,7 +300,7 @@ class MjxSimulator(Simulator):
                 state: dict[str, np.ndarray] | None = None) -> Trajectories:
         """Simulator.rollout in one compiled `lax.scan` when the policy is open-loop (its actions do not
         read the observations: `open_loop_actions`); otherwise the generic step-by-step loop."""
-        if not hasattr(policy, "open_loop_actions"):
+        if policy.open_loop_actions is None:
             return super().rollout(params, policy, horizon, seed, progress, state)
         self.reset(params, None, seed, state)
         actions = policy.open_loop_actions(self.num_envs, horizon).to(self.device, torch.float32).clamp(-1.0, 1.0)

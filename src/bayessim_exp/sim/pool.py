@@ -14,8 +14,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import torch
 
+from ..policies import Policy
 from ..tasks.base import Task
-from .base import Policy, Simulator
+from .base import Simulator
 from .integrators import varies
 from .trajectories import Trajectories
 
@@ -49,10 +50,10 @@ class SimulatorPool:
                 progress: bool = False, state: dict[str, np.ndarray] | None = None) -> Trajectories:
         """Trajectories for every row of params [N, D], simulated `chunk` slots at a time; chunk k resets
         with a seed derived from (seed, k). `state` (initial states [N, ...]) replaces the reset draw. A
-        policy with a `plan` (policies.ReplayPolicy) gives each row's actions and initial state; a policy
-        with `select` (policies.OpenLoopPolicy) acts row by row and is cut into chunks with the rows."""
+        policy's `plan` (policies.ReplayPolicy) gives each row's actions and initial state; its `select` cuts
+        it into chunks with the rows (policies.OpenLoopPolicy acts row by row)."""
         params = np.asarray(params, dtype=np.float64)
-        if hasattr(policy, "plan"):
+        if policy.plan is not None:
             policy, planned = policy.plan(len(params))
             state = planned if state is None else state
         seeds = np.random.SeedSequence(seed).generate_state(max(1, -(-len(params) // self.chunk)))
@@ -61,13 +62,12 @@ class SimulatorPool:
             rows = slice(start, start + self.chunk)
             block = params[rows]
             part_state = None if state is None else {f: v[rows] for f, v in state.items()}
-            part_policy = policy.select(rows) if hasattr(policy, "select") else policy
+            part_policy = policy.select(rows)
             n, full = len(block), self._sims.get(self.chunk)
             if n < self.chunk and full is not None and full.pads(n):
                 pad = self.chunk - n
                 part_state = None if part_state is None else {f: _fill(np.asarray(v), pad) for f, v in part_state.items()}
-                if hasattr(part_policy, "select"):
-                    part_policy = part_policy.select(torch.as_tensor(_fill(np.arange(n), pad)))
+                part_policy = part_policy.select(torch.as_tensor(_fill(np.arange(n), pad)))
                 traj = full.rollout(_fill(block, pad), part_policy, horizon, int(seeds[k]), progress, part_state)
                 parts.append(traj.select(slice(0, n)))
             else:

@@ -30,10 +30,10 @@ def summaries_at(points: torch.Tensor, *, task, sims, policy, prior_std: torch.T
     actions otherwise), the same at every point of points [K, D] (parameters in units of the prior's standard
     deviation): (summaries [K, num, F], kept [num])."""
     start = None
-    if hasattr(policy, "plan"):
+    if policy.plan is not None:
         policy, start = policy.plan(num)
     actions = (policy.actions if isinstance(policy, OpenLoopPolicy) else
-               (policy if hasattr(policy, "open_loop_actions") else RandomPolicy(task.action_dim, seed))
+               (policy if policy.open_loop_actions is not None else RandomPolicy(task.action_dim, seed))
                .open_loop_actions(num, horizon))[:, :horizon]
     if start is None:
         start = task.reset_state(np.random.default_rng(seed), num)

@@ -45,7 +45,7 @@ from .parameter_space import ParameterSpace, probit_transform
 from .proposals import ProposalInputs, proposal_named
 from .replay_tempering import temper_to_replays
 from .set_calibration import SetPosteriors, set_importance_draws, simulated_sets_temperature
-from .simulate import predictive_summaries, simulate_as_driven, without_noise
+from .simulate import predictive_summaries, simulate_as_driven
 from .summary_error import Mode as SummaryErrorMode
 from .summary_error import SummaryError
 from .training_data import CalibrateOn, calibration_rows, exact_training_rows, held_out_count, split, summarized
@@ -129,7 +129,7 @@ class BayesSim(InferenceMethod):
         rc = self.inputs.rc
         theta = self.proposal(ctx).sample((rc.collect.trajectories,), generator=torch.Generator().manual_seed(ctx.seed))
         policy = self.inputs.policy(ctx.seed, ctx)
-        exact = without_noise(policy)
+        exact = policy.without_noise()
         n_exact = 0 if exact is None else 2 * held_out_count(len(theta), rc.diagnostics.held_out_fraction)
         cut = len(theta) - n_exact
         traj = self.inputs.sims.rollout(theta[:cut], policy, rc.collect.horizon, ctx.seed, rc.logging.progress)

@@ -10,16 +10,11 @@ import torch
 from ...sim.trajectories import Trajectories
 
 
-def without_noise(policy):
-    """The collect policy as the real data were driven (policies.ReplayPolicy.without_noise), or None."""
-    return policy.without_noise() if hasattr(policy, "without_noise") else None
-
-
 def simulate_as_driven(sims, policy, theta: torch.Tensor, horizon: int, seed: int,
                        summaries: Callable[[Trajectories], torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
     """One trajectory at each theta [K, D] under the collect policy, driven as the real data were where it replays
     them: (kept [K]: neither diverged nor with a non-finite summary, summaries [K, F] in float64)."""
-    traj = sims.rollout(theta, without_noise(policy) or policy, horizon, seed)
+    traj = sims.rollout(theta, policy.without_noise() or policy, horizon, seed)
     x = summaries(traj).double()
     return ~traj.diverged.cpu() & torch.isfinite(x).all(-1), x
 

@@ -36,7 +36,7 @@ def simulate_like_real(sims: SimulatorPool, params: torch.Tensor, real: Trajecto
                     "distribution instead", task.name)
     state = None if start is None else {f: np.tile(v, (n,) + (1,) * (v.ndim - 1)) for f, v in start.items()}
     acting = OpenLoopPolicy(real.actions.repeat(n, 1, 1)) if rollout == "recorded" else policy
-    if hasattr(acting, "plan"):  # the pool would start each row from a recorded trajectory's state, not the real start's
+    if acting.plan is not None:  # the pool would start each row from a recorded trajectory's state, not the real start's
         raise ConfigError("SimOpt's closed_loop rollout runs the round's policy step by step; policy=replay "
                           "replays recorded trajectories: use method.rollout=recorded")
     traj = sims.rollout(rows, acting, real.horizon, seed, state=state)  # the pool's chunks, padded where MJX compiles

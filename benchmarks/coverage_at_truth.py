@@ -38,6 +38,7 @@ from bayessim_exp.distributions.hpd import own_level
 from bayessim_exp.inference.bayessim.condition import condition
 from bayessim_exp.inference.bayessim.method import BayesSim
 from bayessim_exp.inference.bayessim.training_data import CALIBRATE_ON, calibration_rows
+from bayessim_exp.logging.tensorboard import NO_TENSORBOARD
 from bayessim_exp.run_config import check_run_config
 from bayessim_exp.stages import RoundContext
 
@@ -119,7 +120,7 @@ def main() -> None:
     if comp.real.true_params is None:
         raise SystemExit(f"{args.run}: the run's real data carry no true parameters")
     method = build_method(cfg, comp, comp.policy)
-    ctx = RoundContext(RunDir(args.run), args.round, comp.rc.seed, None)
+    ctx = RoundContext(RunDir(args.run), args.round, comp.rc.seed, NO_TENSORBOARD)
     summaries = [ctx.output("summarize", k) for k in train_rounds]
     cut = [len(s["x"]) - int(comp.rc.diagnostics.held_out_fraction * len(s["x"])) for s in summaries]
     theta_train = fitted_space(method, torch.cat([s["theta"][:c] for s, c in zip(summaries, cut)]))

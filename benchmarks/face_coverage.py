@@ -22,6 +22,7 @@ from omegaconf import OmegaConf
 from bayessim_exp.artifacts import RunDir
 from bayessim_exp.components import build_components, build_method
 from bayessim_exp.distributions.hpd import own_level
+from bayessim_exp.logging.tensorboard import NO_TENSORBOARD
 from bayessim_exp.run_config import check_run_config
 from bayessim_exp.stages import RoundContext
 from coverage_at_truth import conditioned  # benchmarks/coverage_at_truth.py
@@ -56,7 +57,7 @@ def main() -> None:
     if comp.task.spec.dim != 2:
         raise SystemExit(f"{args.run}: {comp.task.spec.dim} parameters; face_coverage.py reads two-parameter tasks")
     method = build_method(cfg, comp, comp.policy)
-    ctx = RoundContext(RunDir(args.run), args.round, comp.rc.seed, None)
+    ctx = RoundContext(RunDir(args.run), args.round, comp.rc.seed, NO_TENSORBOARD)
     model = comp.model()
     model.load_state_dict(ctx.output("fit")["model"])
     edges = [float(e) for e in args.bins.split(",")]

@@ -34,6 +34,7 @@ from .distributions.torch_view import TorchDistribution
 from .errors import DataFileError
 from .inference.bayessim.condition import condition
 from .inference.bayessim.correction import MAX_COMPONENTS
+from .logging.tensorboard import NO_TENSORBOARD
 from .run_config import check_run_config
 from .stages import RoundContext
 
@@ -208,7 +209,8 @@ class Run:
         model is built."""
         r = self.round_number(round_index)
         read = registry.posterior_reader(self.config.method.name)
-        return read(RoundContext(RunDir(self.path), r, check_run_config(self.config).seed, None), self.prior)
+        return read(RoundContext(RunDir(self.path), r, check_run_config(self.config).seed, NO_TENSORBOARD),
+                    self.prior)
 
     def handed_on(self, round_index: int | None = None) -> HandedOn:
         """Whose distribution round `round_index` handed on, as its record in results.json says."""

@@ -21,7 +21,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .artifacts import RunDir
-    from .logging.tensorboard import TensorBoardLogger
+    from .logging.tensorboard import NullTensorBoard, TensorBoardLogger
 
 log = logging.getLogger(__name__)
 _ROUND: contextvars.ContextVar[tuple[str, int] | None] = contextvars.ContextVar("round", default=None)
@@ -88,7 +88,8 @@ class RoundContext:
     """What a stage sees: the round, its seed, the TensorBoard logger and earlier artifacts. The stage's own
     objects (simulators, prior, ...) come with the object the stage belongs to, not through here."""
 
-    def __init__(self, run_dir: RunDir, round_index: int, seed: int, tb: TensorBoardLogger | None, stage: str = ""):
+    def __init__(self, run_dir: RunDir, round_index: int, seed: int, tb: TensorBoardLogger | NullTensorBoard,
+                 stage: str = ""):
         self.run_dir, self.round, self.run_seed, self.tb, self.stage = run_dir, round_index, seed, tb, stage
         self._cache: dict[tuple[int, str], dict] = {}
 

@@ -407,6 +407,7 @@ def test_a_finished_runs_posteriors_are_read_back_without_building_a_simulator(c
     """api.load_run reads what each round handed on (round 1: the prior, its guard failing; round 2: its own
     posterior) from the artifacts and the prior alone: the distributions the pipeline handed on."""
     from bayessim_exp.diagnostics import guard
+    from bayessim_exp.logging.tensorboard import NO_TENSORBOARD
     from bayessim_exp.stages import RoundContext
 
     verdicts = iter([guard.GuardReport(["overconfident: forced"], True), guard.GuardReport([])])
@@ -414,7 +415,8 @@ def test_a_finished_runs_posteriors_are_read_back_without_building_a_simulator(c
     pipeline = Pipeline(compose(SMOKE), tmp_path)
     results = pipeline.run()
     assert [r["guard"]["handed_on"] for r in results["rounds"]] == ["the prior", "round 2's posterior"]
-    handed_on = [pipeline.method.posterior(RoundContext(pipeline.run_dir, r, pipeline.rc.seed, None)) for r in (1, 2)]
+    handed_on = [pipeline.method.posterior(RoundContext(pipeline.run_dir, r, pipeline.rc.seed, NO_TENSORBOARD))
+                 for r in (1, 2)]
 
     build = registry.build
     monkeypatch.setattr(registry, "build", lambda group, cfg, **deps: pytest.fail(f"built a {group}")

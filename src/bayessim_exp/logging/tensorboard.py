@@ -1,4 +1,5 @@
-"""TensorBoard writer for a run: scalars, loss curves, posterior figures and the config text.
+"""TensorBoard writer for a run: scalars, loss curves, posterior figures and the config text; `NO_TENSORBOARD` writes
+nothing, for stages run or read outside a run.
 
 Figures are drawn by a separate process (logging/plots.py, as PNG): importing matplotlib and drawing
 took 2.5-3 s of the default run's stages on the H100 machine, which the run's own process now spends
@@ -137,6 +138,9 @@ class TensorBoardLogger:
             self.writer.add_scalar(f"loss/round_{round_index}/val", val, k)
         self.writer.add_scalar("loss/best_val_per_round", history["best_val"], round_index)
 
+    def scalar(self, tag: str, value: float, step: int) -> None:
+        self.writer.add_scalar(tag, value, step)
+
     def scalars(self, round_index: int, values: dict[str, float]) -> None:
         self._add_drawn()
         for tag, v in values.items():
@@ -183,3 +187,16 @@ class TensorBoardLogger:
         self._add_drawn(wait=True)
         self._drawing.shutdown()
         self.writer.close()
+
+
+class NullTensorBoard:
+    """TensorBoardLogger's methods, writing nothing and taking no draws (a run's scored rounds want the logger's
+    posterior draws in their random streams: a Pipeline always has one)."""
+
+    def _nothing(self, *args, **kwargs) -> None:
+        pass
+
+    config = losses = scalar = scalars = posterior = identifiability = image = replays = close = _nothing
+
+
+NO_TENSORBOARD = NullTensorBoard()

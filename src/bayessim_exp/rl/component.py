@@ -78,12 +78,9 @@ class PPOComponent:
         return {"trainer": trainer.state_dict(), "curve": curve}
 
     def _logger(self, ctx: RoundContext):
-        if ctx.tb is None:
-            return None
-
         def on_batch(steps: int, stats: dict) -> None:
             for key, value in stats.items():
-                ctx.tb.writer.add_scalar(f"rl_round_{ctx.round:03d}/{key}", value, steps)
+                ctx.tb.scalar(f"rl_round_{ctx.round:03d}/{key}", value, steps)
 
         return on_batch
 
@@ -114,7 +111,7 @@ class PPOComponent:
             out["video"], why = render_gif(self.task, self.true_params, policy, e.video_steps, e.video_size, ctx.seed)
             if out["video"] is None:
                 log.warning("round %d: no video of the policy: %s", ctx.round, why)
-        if ctx.tb is not None and out["video"] is not None:  # the returns reach TensorBoard through record()
+        if out["video"] is not None:  # the returns reach TensorBoard through record()
             ctx.tb.image("rl/surrogate_real_video", out["video"], ctx.round)
         log.info("round %d: surrogate real return %.1f (min %.1f, max %.1f) over %d episodes", ctx.round,
                  out["summary"]["mean"], out["summary"]["min"], out["summary"]["max"], e.episodes)

@@ -19,16 +19,17 @@ from omegaconf import DictConfig
 from ..artifacts import RunDir
 from ..components import Components, build_rl
 from ..distributions.base import ParameterDistribution
+from ..logging.tensorboard import NO_TENSORBOARD
 from ..stages import RoundContext, run_stage
 from .none import NoRL
 
 if TYPE_CHECKING:
-    from ..logging.tensorboard import TensorBoardLogger
+    from ..logging.tensorboard import NullTensorBoard, TensorBoardLogger
 
 
 class StandaloneRounds:
     def __init__(self, cfg: DictConfig, comp: Components, distribution: ParameterDistribution, out_dir: str | Path,
-                 tb: TensorBoardLogger | None = None):
+                 tb: TensorBoardLogger | NullTensorBoard = NO_TENSORBOARD):
         """The RL component of `cfg` (built from `comp`), training on `distribution` every round."""
         self.rl = build_rl(cfg, comp, lambda ctx: distribution)
         if isinstance(self.rl, NoRL):

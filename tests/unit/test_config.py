@@ -75,7 +75,6 @@ def test_defaults_are_written_once_in_the_yaml(compose, group, name):
         assert keys and keys <= {f.name for f in fields}
 
 
-
 @pytest.mark.parametrize("name", [name for group, name in OPTIONS if group == "model"])
 def test_no_model_writes_a_key_of_the_training_block_it_names(name):
     """A model names conf/model/training after its _self_ (the block's file says why), so a key written in both would

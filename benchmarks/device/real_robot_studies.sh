@@ -4,7 +4,8 @@
 #
 #   COMMIT=<sha> OMP_NUM_THREADS=1 bash benchmarks/device/gpu_benchmarks.sh background exec \
 #       bash benchmarks/device/real_robot_studies.sh
-#   sleep 540; bash benchmarks/device/real_robot_studies.sh collect      # repeated, each call right after the last
+#   bash benchmarks/device/real_robot_studies.sh wait 540; bash benchmarks/device/real_robot_studies.sh collect
+#                                                                      # repeated, each call right after the last
 #
 # Sweeps, each into /tmp/real_robot_studies/<name> (round records in results.json, written after every round):
 # - franka_<escape>: FrankaCabinet at its own real_params (BayesSimIG's robot, in the prior's joint tail), seeds 0-2;
@@ -18,6 +19,8 @@
 # $STUDIES picks among franka, shadow, mission (both missions; mission_gpu or mission_cpu alone) and nominal
 # (default: all four).
 # Every BayesSim fit runs on a GPU (device=cuda, round robin), every simulation natively on $THREADS threads.
+# `wait SECONDS` returns when no sweep is left running or after SECONDS, whichever is first (a lease's device time
+# counts while a fixed sleep outlasts the runs: on one H200 the real robots finished in 8 of 17 minutes slept).
 # `collect` tars the run directories' results into $OUT/real_robot_studies.tar.gz and prints
 # benchmarks/real_robot_rounds.py's table of each sweep (what each round proposed from, its guard, the gain at the truth).
 set -u
@@ -26,6 +29,14 @@ WORK=/tmp/real_robot_studies
 OUT=${OUT:-$PWD/device_out}
 PY=${PY:-python3}
 mkdir -p "$OUT"
+
+if [ "${1:-}" = wait ]; then
+    for _ in $(seq "${2:-540}"); do
+        pgrep -f "hydra.sweep.dir=$WORK/" >/dev/null || exit 0
+        sleep 1
+    done
+    exit 0
+fi
 
 if [ "${1:-}" = collect ]; then
     for log in "$WORK"/*.log; do [ -f "$log" ] && { echo "== ${log##*/}"; tail -n 3 "$log"; }; done

@@ -189,14 +189,19 @@ class TensorBoardLogger:
         self.writer.close()
 
 
+def _nothing(*args, **kwargs) -> None:
+    return None
+
+
 class NullTensorBoard:
-    """TensorBoardLogger's methods, writing nothing and taking no draws (a run's scored rounds want the logger's
-    posterior draws in their random streams: a Pipeline always has one)."""
+    """Every public method of TensorBoardLogger, read from it (so the two cannot drift apart), writing nothing and
+    taking no draws (a run's scored rounds want the logger's posterior draws in their random streams: a Pipeline
+    always has one)."""
 
-    def _nothing(self, *args, **kwargs) -> None:
-        pass
-
-    config = losses = scalar = scalars = posterior = identifiability = image = replays = close = _nothing
+    def __getattr__(self, name: str):
+        if name.startswith("_") or not callable(getattr(TensorBoardLogger, name, None)):
+            raise AttributeError(f"{type(self).__name__} has no {name!r}: TensorBoardLogger has no such method")
+        return _nothing
 
 
 NO_TENSORBOARD = NullTensorBoard()
